@@ -1,0 +1,152 @@
+//! Isotropic linear elasticity: stiffness blocks and stresses from gradients.
+//!
+//! For shape functions `φ_a` with gradients `g_a = ∇φ_a` at a quadrature
+//! point of weight `w` (m^3), the 3x3 block of `B^T C B` that couples node `a`
+//! (rows, displacement components `i`) with node `b` (columns, components
+//! `j`) for an isotropic material with Lamé parameters `λ`, `μ` (Pa) is
+//!
+//! ```text
+//! K_ab[i][j] += w (λ g_a[i] g_b[j] + μ g_a[j] g_b[i] + μ (g_a · g_b) δ_ij)   [N/m]
+//! ```
+//!
+//! which is exactly `w B_a^T C B_b` with the 6x6 Voigt matrix `C` of
+//! [`voigt_matrix`]; a test checks the two against each other.
+
+/// Lamé parameters `(λ, μ)` in Pa from Young's modulus `E` (Pa) and Poisson's
+/// ratio `ν` (dimensionless, `-1 < ν < 1/2`).
+#[inline]
+pub fn lame(young: f64, poisson: f64) -> (f64, f64) {
+    let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+    let mu = young / (2.0 * (1.0 + poisson));
+    (lambda, mu)
+}
+
+/// The 6x6 isotropic constitutive matrix `C` (Pa), row-major, in the Voigt
+/// order `[xx, yy, zz, xy, xz, yz]` with engineering shear strains.
+pub fn voigt_matrix(lambda: f64, mu: f64) -> [[f64; 6]; 6] {
+    let mut c = [[0.0; 6]; 6];
+    for (i, row) in c.iter_mut().enumerate().take(3) {
+        row[..3].fill(lambda);
+        row[i] = lambda + 2.0 * mu;
+    }
+    for (i, row) in c.iter_mut().enumerate().skip(3) {
+        row[i] = mu;
+    }
+    c
+}
+
+/// Adds `w B_a^T C B_b` to the row-major 3x3 block `block` (see module docs).
+#[inline(always)]
+pub fn add_block(block: &mut [f64; 9], ga: [f64; 3], gb: [f64; 3], w: f64, lambda: f64, mu: f64) {
+    let wl = w * lambda;
+    let wm = w * mu;
+    let d = wm * (ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2]);
+    for i in 0..3 {
+        for j in 0..3 {
+            block[3 * i + j] += wl * ga[i] * gb[j] + wm * ga[j] * gb[i];
+        }
+        block[4 * i] += d;
+    }
+}
+
+/// Element stiffness `K_e = Σ_q w_q B_q^T C B_q` for `k` nodes, written as a
+/// dense row-major `3k x 3k` matrix into `ke` (overwritten).
+///
+/// Layout: `grads[q * k + a]` is `∇φ_a` at quadrature point `q`, `weights[q]`
+/// its weight in m^3; `ke.len() == 9 k^2`; entry `(3a + i, 3b + j)` lives at
+/// `ke[(3a + i) * 3k + 3b + j]`.
+pub fn element_stiffness(grads: &[[f64; 3]], weights: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]) {
+    assert_eq!(grads.len(), weights.len() * k, "one gradient per node and point");
+    assert_eq!(ke.len(), 9 * k * k, "ke must be 3k x 3k");
+    ke.fill(0.0);
+    let n = 3 * k;
+    for (q, &w) in weights.iter().enumerate() {
+        let g = &grads[q * k..(q + 1) * k];
+        for a in 0..k {
+            for b in 0..k {
+                let mut block = [0.0; 9];
+                add_block(&mut block, g[a], g[b], w, lambda, mu);
+                for i in 0..3 {
+                    let row = (3 * a + i) * n + 3 * b;
+                    for j in 0..3 {
+                        ke[row + j] += block[3 * i + j];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Cauchy stress (Pa, Voigt order) of the displacement gradient
+/// `grad_u[i][j] = ∂u_i/∂x_j`.
+#[inline]
+pub fn stress(grad_u: [[f64; 3]; 3], lambda: f64, mu: f64) -> [f64; 6] {
+    let tr = grad_u[0][0] + grad_u[1][1] + grad_u[2][2];
+    [
+        lambda * tr + 2.0 * mu * grad_u[0][0],
+        lambda * tr + 2.0 * mu * grad_u[1][1],
+        lambda * tr + 2.0 * mu * grad_u[2][2],
+        mu * (grad_u[0][1] + grad_u[1][0]),
+        mu * (grad_u[0][2] + grad_u[2][0]),
+        mu * (grad_u[1][2] + grad_u[2][1]),
+    ]
+}
+
+/// Von Mises equivalent stress (Pa) of a Voigt stress `[xx, yy, zz, xy, xz, yz]`.
+#[inline]
+pub fn von_mises(s: [f64; 6]) -> f64 {
+    let d1 = s[0] - s[1];
+    let d2 = s[1] - s[2];
+    let d3 = s[2] - s[0];
+    (0.5 * (d1 * d1 + d2 * d2 + d3 * d3) + 3.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5])).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `B_a` (6x3) for gradient `g` in Voigt order `[xx, yy, zz, xy, xz, yz]`.
+    fn b_matrix(g: [f64; 3]) -> [[f64; 3]; 6] {
+        [
+            [g[0], 0.0, 0.0],
+            [0.0, g[1], 0.0],
+            [0.0, 0.0, g[2]],
+            [g[1], g[0], 0.0],
+            [g[2], 0.0, g[0]],
+            [0.0, g[2], g[1]],
+        ]
+    }
+
+    #[test]
+    fn block_formula_equals_bt_c_b() {
+        let (l, m) = lame(2.5e5, 0.27);
+        let c = voigt_matrix(l, m);
+        let ga = [0.3, -1.2, 0.7];
+        let gb = [-0.4, 0.9, 2.1];
+        let mut block = [0.0; 9];
+        add_block(&mut block, ga, gb, 0.37, l, m);
+        let (ba, bb) = (b_matrix(ga), b_matrix(gb));
+        for i in 0..3 {
+            for j in 0..3 {
+                let mut s = 0.0;
+                for p in 0..6 {
+                    for q in 0..6 {
+                        s += ba[p][i] * c[p][q] * bb[q][j];
+                    }
+                }
+                let want = 0.37 * s;
+                assert!((block[3 * i + j] - want).abs() <= 1e-12 * want.abs().max(1.0), "{i}{j}");
+            }
+        }
+    }
+
+    #[test]
+    fn stress_of_uniaxial_strain() {
+        let (l, m) = lame(1e5, 0.3);
+        let s = stress([[1e-3, 0.0, 0.0], [0.0; 3], [0.0; 3]], l, m);
+        assert!((s[0] - (l + 2.0 * m) * 1e-3).abs() < 1e-9);
+        assert!((s[1] - l * 1e-3).abs() < 1e-9);
+        // pure shear: von Mises = sqrt(3) |tau|
+        assert!((von_mises([0.0, 0.0, 0.0, 2.0, 0.0, 0.0]) - 2.0 * 3f64.sqrt()).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,136 @@
+//! `cleave`: run scenes, inspect meshes, measure throughput.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use cleave::mesh::ValidationOptions;
+use cleave::scene::{run_scene, LoadedScene, RunOptions};
+
+#[derive(Parser)]
+#[command(name = "cleave", version, about = "Elastic solids on polyhedral finite elements")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene file and write frames and summary.json.
+    Run {
+        /// The scene (TOML).
+        scene: PathBuf,
+        /// Output folder (default: the scene's output.dir).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Number of steps (default: the scene's simulation.steps).
+        #[arg(long)]
+        steps: Option<usize>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Print counts, volume, bounding box and a validation report of a mesh.
+    Info {
+        /// A mesh file (.mesh, .msh, .vtu, .node/.ele).
+        mesh: PathBuf,
+    },
+    /// Run the throughput suite.
+    Bench {
+        /// Write the report as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Smaller meshes, for a quick check.
+        #[arg(long)]
+        quick: bool,
+    },
+}
+
+fn set_threads(threads: Option<usize>) -> Result<(), String> {
+    if let Some(n) = threads {
+        if n == 0 {
+            return Err("--threads must be at least 1".into());
+        }
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.command {
+        Command::Run { scene, out, steps, threads } => {
+            set_threads(threads)?;
+            let loaded = LoadedScene::load(&scene).map_err(|e| e.to_string())?;
+            let opts = RunOptions { out, steps };
+            let dir = loaded.output_dir(&opts);
+            let summary = run_scene(&loaded, &opts).map_err(|e| e.to_string())?;
+            println!(
+                "{}: {} nodes, {} elements, {} step(s) in {:.3} s; max displacement {:.6e} m; output in {}",
+                scene.display(),
+                summary.end.nodes,
+                summary.end.elements,
+                summary.steps,
+                summary.wall_time_total,
+                summary.max_displacement,
+                dir.display()
+            );
+            Ok(())
+        }
+        Command::Info { mesh } => {
+            let m = cleave::io::read_mesh(&mesh).map_err(|e| e.to_string())?;
+            let (lo, hi) = m.bounding_box();
+            println!("{}", mesh.display());
+            println!("  nodes     {}", m.nodes.len());
+            println!("  faces     {}", m.faces.len());
+            println!("  elements  {}", m.elements.len());
+            for (k, n) in m.count_by_vertex_count() {
+                println!("    {k:>3} vertices: {n}");
+            }
+            println!("  volume    {:.9e}", m.total_volume());
+            println!("  bbox      [{:.6e}, {:.6e}, {:.6e}] .. [{:.6e}, {:.6e}, {:.6e}]", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+            let adj = m.adjacency();
+            let (_, components) = adj.element_components(&m);
+            let unused = (0..m.nodes.len()).filter(|&i| adj.node_elements(i).is_empty()).count();
+            println!("  components {components}");
+            if unused > 0 {
+                println!("  note: {unused} node(s) belong to no element (they are held fixed in a simulation)");
+            }
+            let problems = m.check(&ValidationOptions::default(), 20);
+            if problems.is_empty() {
+                println!("  validation: ok");
+                Ok(())
+            } else {
+                for p in &problems {
+                    println!("  problem: {p}");
+                }
+                Err(format!("{} problem(s) found (first 20 shown)", problems.len()))
+            }
+        }
+        Command::Bench { json, threads, quick } => {
+            set_threads(threads)?;
+            let report = cleave::bench::run_suite(quick).map_err(|e| e.to_string())?;
+            println!("{}", report.to_table());
+            if let Some(path) = json {
+                let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+                cleave::io::write_text(&path, &text).map_err(|e| e.to_string())?;
+                println!("report written to {}", path.display());
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,323 @@
+//! VTK XML unstructured grids (`.vtu`).
+//!
+//! Writing: tetrahedra as `VTK_TETRA` (10), every other element as
+//! `VTK_POLYHEDRON` (42) with the `faces`/`faceoffsets` arrays, so any element
+//! cleave makes opens in ParaView. Arrays are base64 `binary` with a UInt64
+//! header. Reading: `VTK_TETRA`, `VTK_HEXAHEDRON` (12) and `VTK_POLYHEDRON`
+//! cells from `ascii` or uncompressed `binary` arrays.
+
+use std::fmt::Write;
+use std::path::Path;
+
+use base64::Engine;
+use quick_xml::events::Event;
+
+use super::{read_text, write_text, IoError};
+use crate::mesh::{Cell, PolyMesh};
+
+const VTK_TETRA: u8 = 10;
+const VTK_HEXAHEDRON: u8 = 12;
+const VTK_POLYHEDRON: u8 = 42;
+
+/// Point and cell data written with a mesh.
+#[derive(Default)]
+pub struct VtuFields<'a> {
+    /// Per-node 3-vectors (e.g. `displacement` in m, `velocity` in m/s).
+    pub point_vectors: Vec<(&'a str, &'a [[f64; 3]])>,
+    /// Per-element scalars (e.g. `von_mises` in Pa).
+    pub cell_scalars: Vec<(&'a str, &'a [f64])>,
+    /// Per-element integers (e.g. `element_id`, `vertex_count`).
+    pub cell_ints: Vec<(&'a str, &'a [i64])>,
+}
+
+fn b64<T: bytemuck::Pod>(data: &[T]) -> String {
+    let bytes: &[u8] = bytemuck::cast_slice(data);
+    let mut buf = Vec::with_capacity(8 + bytes.len());
+    buf.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+    buf.extend_from_slice(bytes);
+    base64::engine::general_purpose::STANDARD.encode(buf)
+}
+
+fn data_array(s: &mut String, ty: &str, name: &str, comps: usize, payload: String) {
+    let _ = writeln!(
+        s,
+        "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{comps}\" format=\"binary\">{payload}</DataArray>"
+    );
+}
+
+/// Writes `mesh` with node positions `points` (m; pass the rest positions or
+/// the deformed ones) and the given fields.
+pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &VtuFields) -> Result<(), IoError> {
+    let mut conn: Vec<i64> = Vec::new();
+    let mut offsets: Vec<i64> = Vec::with_capacity(mesh.elements.len());
+    let mut types: Vec<u8> = Vec::with_capacity(mesh.elements.len());
+    let mut faces: Vec<i64> = Vec::new();
+    let mut faceoffsets: Vec<i64> = Vec::with_capacity(mesh.elements.len());
+    let mut any_poly = false;
+    for el in &mesh.elements {
+        if el.nodes.len() == 4 && el.faces.len() == 4 {
+            let v = &el.nodes;
+            let rest = |i: usize| mesh.nodes[v[i] as usize];
+            let positive = cleave_kernels::tet::signed_volume(rest(0), rest(1), rest(2), rest(3)) > 0.0;
+            let order = if positive { [0, 1, 2, 3] } else { [0, 2, 1, 3] };
+            conn.extend(order.iter().map(|&i| v[i] as i64));
+            types.push(VTK_TETRA);
+            faceoffsets.push(-1);
+        } else {
+            any_poly = true;
+            conn.extend(el.nodes.iter().map(|&x| x as i64));
+            types.push(VTK_POLYHEDRON);
+            faces.push(el.faces.len() as i64);
+            for r in &el.faces {
+                let lp = &mesh.faces[r.face as usize].vertices;
+                faces.push(lp.len() as i64);
+                if r.outward {
+                    faces.extend(lp.iter().map(|&x| x as i64));
+                } else {
+                    faces.extend(lp.iter().rev().map(|&x| x as i64));
+                }
+            }
+            faceoffsets.push(faces.len() as i64);
+        }
+        offsets.push(conn.len() as i64);
+    }
+    let flat: Vec<f64> = points.iter().flatten().copied().collect();
+    let mut s = String::new();
+    s.push_str("<?xml version=\"1.0\"?>\n");
+    s.push_str("<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n");
+    s.push_str("  <UnstructuredGrid>\n");
+    let _ = writeln!(s, "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">", points.len(), mesh.elements.len());
+    s.push_str("      <PointData>\n");
+    for (name, v) in &fields.point_vectors {
+        let flat: Vec<f64> = v.iter().flatten().copied().collect();
+        data_array(&mut s, "Float64", name, 3, b64(&flat));
+    }
+    s.push_str("      </PointData>\n      <CellData>\n");
+    for (name, v) in &fields.cell_scalars {
+        data_array(&mut s, "Float64", name, 1, b64(v));
+    }
+    for (name, v) in &fields.cell_ints {
+        data_array(&mut s, "Int64", name, 1, b64(v));
+    }
+    s.push_str("      </CellData>\n      <Points>\n");
+    data_array(&mut s, "Float64", "Points", 3, b64(&flat));
+    s.push_str("      </Points>\n      <Cells>\n");
+    data_array(&mut s, "Int64", "connectivity", 1, b64(&conn));
+    data_array(&mut s, "Int64", "offsets", 1, b64(&offsets));
+    data_array(&mut s, "UInt8", "types", 1, b64(&types));
+    if any_poly {
+        data_array(&mut s, "Int64", "faces", 1, b64(&faces));
+        data_array(&mut s, "Int64", "faceoffsets", 1, b64(&faceoffsets));
+    }
+    s.push_str("      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
+    write_text(path, &s)
+}
+
+/// One `<DataArray>` as read: its attributes and decoded numbers.
+struct Array {
+    name: String,
+    values: Vec<f64>,
+    line: usize,
+}
+
+/// Reads the cells of a `.vtu` file as a mesh.
+pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
+    let text = read_text(path)?;
+    let line_at = |pos: u64| text.as_bytes()[..(pos as usize).min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1;
+    let mut reader = quick_xml::Reader::from_str(&text);
+    let mut header64 = false;
+    let mut section = String::new();
+    let mut current: Option<(String, String, String, usize)> = None; // name, type, format, line
+    let mut body = String::new();
+    let mut points: Option<Array> = None;
+    let mut cell_arrays: Vec<Array> = Vec::new();
+    loop {
+        let pos = reader.buffer_position();
+        let ev = reader.read_event().map_err(|e| IoError::parse(path, line_at(pos), format!("malformed XML: {e}")))?;
+        match ev {
+            Event::Start(e) | Event::Empty(e) => {
+                let tag = String::from_utf8_lossy(e.name().as_ref()).into_owned();
+                let attr = |key: &str| -> Option<String> {
+                    e.attributes()
+                        .flatten()
+                        .find(|a| a.key.as_ref() == key.as_bytes())
+                        .map(|a| String::from_utf8_lossy(&a.value).into_owned())
+                };
+                match tag.as_str() {
+                    "VTKFile" => {
+                        if attr("type").as_deref() != Some("UnstructuredGrid") {
+                            return Err(IoError::unsupported(path, "not a VTK UnstructuredGrid file"));
+                        }
+                        if attr("compressor").is_some() {
+                            return Err(IoError::unsupported(path, "compressed VTU is not supported; save uncompressed"));
+                        }
+                        if attr("byte_order").as_deref() == Some("BigEndian") {
+                            return Err(IoError::unsupported(path, "big-endian VTU is not supported"));
+                        }
+                        header64 = attr("header_type").as_deref() == Some("UInt64");
+                    }
+                    "Points" | "Cells" | "PointData" | "CellData" => section = tag,
+                    "AppendedData" => {
+                        return Err(IoError::unsupported(path, "appended VTU data is not supported; save ascii or binary"))
+                    }
+                    "DataArray" => {
+                        current = Some((
+                            attr("Name").unwrap_or_default(),
+                            attr("type").unwrap_or_default(),
+                            attr("format").unwrap_or_else(|| "ascii".into()),
+                            line_at(pos),
+                        ));
+                        body.clear();
+                    }
+                    _ => {}
+                }
+            }
+            Event::Text(t) if current.is_some() => {
+                body.push_str(&t.decode().map_err(|e| IoError::parse(path, line_at(pos), e.to_string()))?);
+            }
+            Event::End(e) if e.name().as_ref() == b"DataArray" => {
+                if let Some((name, ty, format, line)) = current.take() {
+                    let values = decode_array(path, line, &ty, &format, body.trim(), header64)?;
+                    let arr = Array { name, values, line };
+                    match section.as_str() {
+                        "Points" => points = Some(arr),
+                        "Cells" => cell_arrays.push(arr),
+                        _ => {}
+                    }
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    let points = points.ok_or_else(|| IoError::unsupported(path, "no <Points> array"))?;
+    if points.values.len() % 3 != 0 {
+        return Err(IoError::parse(path, points.line, "the Points array length is not a multiple of 3"));
+    }
+    let nodes: Vec<[f64; 3]> = points.values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let get = |n: &str| cell_arrays.iter().find(|a| a.name == n);
+    let conn = get("connectivity").ok_or_else(|| IoError::unsupported(path, "no Cells/connectivity array"))?;
+    let offs = get("offsets").ok_or_else(|| IoError::unsupported(path, "no Cells/offsets array"))?;
+    let types = get("types").ok_or_else(|| IoError::unsupported(path, "no Cells/types array"))?;
+    let as_index = |arr: &Array, v: f64| -> Result<usize, IoError> {
+        if v < 0.0 || v.fract() != 0.0 {
+            return Err(IoError::parse(path, arr.line, format!("'{}' holds {v}, not an index", arr.name)));
+        }
+        Ok(v as usize)
+    };
+    let mut cells = Vec::with_capacity(types.values.len());
+    let mut start = 0usize;
+    let faces = get("faces");
+    let faceoffs = get("faceoffsets");
+    for (c, &ty) in types.values.iter().enumerate() {
+        let end = as_index(offs, *offs.values.get(c).ok_or_else(|| IoError::parse(path, offs.line, "fewer offsets than cells"))?)?;
+        if end < start || end > conn.values.len() {
+            return Err(IoError::parse(path, offs.line, format!("offset of cell {c} is out of range")));
+        }
+        let ids: Vec<u32> = conn.values[start..end]
+            .iter()
+            .map(|&v| {
+                let i = as_index(conn, v)?;
+                if i >= nodes.len() {
+                    return Err(IoError::parse(path, conn.line, format!("cell {c} refers to point {i}, but there are {}", nodes.len())));
+                }
+                Ok(i as u32)
+            })
+            .collect::<Result<_, _>>()?;
+        start = end;
+        match ty as u8 {
+            VTK_TETRA if ids.len() == 4 => cells.push(Cell::Tet([ids[0], ids[1], ids[2], ids[3]])),
+            VTK_HEXAHEDRON if ids.len() == 8 => cells.push(Cell::Hex(std::array::from_fn(|i| ids[i]))),
+            VTK_POLYHEDRON => {
+                let (Some(faces), Some(fo)) = (faces, faceoffs) else {
+                    return Err(IoError::unsupported(path, "polyhedron cells need 'faces' and 'faceoffsets' arrays"));
+                };
+                let end = as_index(fo, fo.values[c])?;
+                let prev = (0..c).rev().map(|k| fo.values[k]).find(|&v| v >= 0.0).map_or(Ok(0), |v| as_index(fo, v))?;
+                if end > faces.values.len() || prev > end {
+                    return Err(IoError::parse(path, fo.line, format!("faceoffsets of cell {c} out of range")));
+                }
+                let stream = &faces.values[prev..end];
+                let mut loops = Vec::new();
+                let nf = stream.first().map_or(Ok(0), |&v| as_index(faces, v))?;
+                let mut k = 1;
+                for _ in 0..nf {
+                    let n = stream.get(k).map_or(Ok(0), |&v| as_index(faces, v))?;
+                    let Some(lp) = stream.get(k + 1..k + 1 + n) else {
+                        return Err(IoError::parse(path, faces.line, format!("face stream of cell {c} is truncated")));
+                    };
+                    let lp: Vec<u32> = lp.iter().map(|&v| as_index(faces, v).map(|i| i as u32)).collect::<Result<_, _>>()?;
+                    if let Some(&bad) = lp.iter().find(|&&i| i as usize >= nodes.len()) {
+                        return Err(IoError::parse(path, faces.line, format!("cell {c} refers to point {bad}, out of range")));
+                    }
+                    loops.push(lp);
+                    k += 1 + n;
+                }
+                cells.push(Cell::Polyhedron(loops));
+            }
+            other => {
+                return Err(IoError::unsupported(
+                    path,
+                    format!("cell {c} has VTK type {other} with {} points (tetra 10, hexahedron 12, polyhedron 42 are read)", ids.len()),
+                ))
+            }
+        }
+    }
+    PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))
+}
+
+fn decode_array(path: &Path, line: usize, ty: &str, format: &str, body: &str, header64: bool) -> Result<Vec<f64>, IoError> {
+    match format {
+        "ascii" => body
+            .split_whitespace()
+            .map(|t| {
+                t.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| IoError::parse(path, line, format!("'{t}' is not a finite number")))
+            })
+            .collect(),
+        "binary" => {
+            let raw = base64::engine::general_purpose::STANDARD
+                .decode(body.as_bytes())
+                .map_err(|e| IoError::parse(path, line, format!("bad base64 data: {e}")))?;
+            let hlen = if header64 { 8 } else { 4 };
+            if raw.len() < hlen {
+                return Err(IoError::parse(path, line, "binary array shorter than its header"));
+            }
+            let n = if header64 {
+                u64::from_le_bytes(raw[..8].try_into().unwrap()) as usize
+            } else {
+                u32::from_le_bytes(raw[..4].try_into().unwrap()) as usize
+            };
+            let data = raw.get(hlen..hlen + n).ok_or_else(|| IoError::parse(path, line, "binary array is truncated"))?;
+            let size = match ty {
+                "Float64" | "Int64" | "UInt64" => 8,
+                "Float32" | "Int32" | "UInt32" => 4,
+                "Int16" | "UInt16" => 2,
+                "Int8" | "UInt8" => 1,
+                _ => return Err(IoError::unsupported(path, format!("line {line}: DataArray type '{ty}' is not supported"))),
+            };
+            let vals: Vec<f64> = data
+                .chunks_exact(size)
+                .map(|c| match ty {
+                    "Float64" => f64::from_le_bytes(c.try_into().unwrap()),
+                    "Int64" => i64::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "UInt64" => u64::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "Float32" => f32::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "Int32" => i32::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "UInt32" => u32::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "Int16" => i16::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "UInt16" => u16::from_le_bytes(c.try_into().unwrap()) as f64,
+                    "Int8" => c[0] as i8 as f64,
+                    _ => c[0] as f64,
+                })
+                .collect();
+            if let Some(bad) = vals.iter().position(|v| !v.is_finite()) {
+                return Err(IoError::parse(path, line, format!("value {bad} of the array is not finite")));
+            }
+            Ok(vals)
+        }
+        other => Err(IoError::unsupported(path, format!("line {line}: DataArray format '{other}' is not supported"))),
+    }
+}

@@ -1,0 +1,69 @@
+//! # cleave
+//!
+//! Elastic solids simulated with finite elements on arbitrary polyhedral
+//! elements, so that cutting, fracture and adaptive refinement never need
+//! tetrahedral remeshing.
+//!
+//! The library is the product; the `cleave` program is a thin layer over it.
+//! Data flows as follows (see `DESIGN.md`):
+//!
+//! 1. [`mesh::PolyMesh`]: nodes, global faces with one triangulation each,
+//!    elements as closed polyhedra; read by [`io`] or made by [`meshing`].
+//! 2. [`store::ElementStore`]: elements batched by vertex count, with their
+//!    stiffness matrices and lumped masses.
+//! 3. [`assembly::SparsePattern`]: the global sparse structure, built once
+//!    per topology, and deterministic parallel assembly.
+//! 4. [`solve`]: sparse Cholesky (and iterative solvers).
+//! 5. [`sim::Simulation`]: state, constraints and the solve of a step.
+//! 6. [`scene`]: TOML scene files that drive all of the above, and
+//!    [`output`] for frames and reports.
+//!
+//! Units are SI throughout: metres, pascals, kilograms, seconds.
+
+// `!(x > 0.0)` is how this crate rejects NaN together with out-of-range
+// values; `partial_cmp` would hide that intent.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod assembly;
+pub mod bench;
+pub mod io;
+pub mod material;
+pub mod mesh;
+pub mod meshing;
+pub mod output;
+pub mod scene;
+pub mod sim;
+pub mod solve;
+pub mod store;
+pub mod topology;
+
+use thiserror::Error;
+
+/// Any failure of cleave, by layer. Every variant names the place.
+#[derive(Debug, Error)]
+pub enum Error {
+    /// A mesh is structurally or geometrically invalid.
+    #[error("invalid mesh: {0}")]
+    Mesh(#[from] mesh::MeshError),
+    /// A file could not be read or written.
+    #[error(transparent)]
+    Io(#[from] io::IoError),
+    /// A scene file is malformed or holds a value out of range.
+    #[error(transparent)]
+    Scene(#[from] scene::SceneError),
+    /// A material parameter is out of range.
+    #[error(transparent)]
+    Material(#[from] material::MaterialError),
+    /// A basis could not be built on an element.
+    #[error(transparent)]
+    Basis(#[from] store::BasisError),
+    /// A plane split failed.
+    #[error(transparent)]
+    Split(#[from] topology::SplitError),
+    /// A linear solve failed.
+    #[error("solve failed: {0}")]
+    Solve(#[from] solve::SolveError),
+    /// A parameter passed through the API is invalid.
+    #[error("invalid parameter: {0}")]
+    Parameter(String),
+}

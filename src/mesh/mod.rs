@@ -1,0 +1,336 @@
+//! The polyhedral mesh: nodes, global faces shared by elements, elements as
+//! closed polyhedra.
+//!
+//! Every face is a planar vertex loop stored once and referenced by the one
+//! (boundary) or two (interior) elements it bounds. A reference carries the
+//! orientation: `outward == true` means the loop is counter-clockwise seen
+//! from outside that element (its right-hand normal points out of it). Each
+//! face carries one triangulation of its loop that every element touching it
+//! uses, which keeps mean value shape functions C0 across the face.
+//!
+//! Units: node positions are in metres.
+
+mod adjacency;
+mod geometry;
+mod triangulate;
+mod validate;
+
+pub use adjacency::Adjacency;
+pub use geometry::{face_geometry, FaceGeometry};
+pub use triangulate::triangulate_loop;
+pub use validate::{MeshError, ValidationOptions};
+
+use std::collections::HashMap;
+
+use cleave_kernels::vec3::{add, scale, sub};
+
+/// A global face: a vertex loop and its triangulation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Face {
+    /// Node ids around the face, counter-clockwise about the face normal.
+    pub vertices: Vec<u32>,
+    /// Triangles of the loop in node ids, each oriented like the loop.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// One element's reference to a global face.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FaceRef {
+    /// Index into [`PolyMesh::faces`].
+    pub face: u32,
+    /// Whether the face loop's normal points out of this element.
+    pub outward: bool,
+}
+
+/// A polyhedral element: its faces and (derived) its sorted node ids.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Element {
+    /// The faces bounding this element.
+    pub faces: Vec<FaceRef>,
+    /// The element's nodes in increasing id order (the element-local order).
+    pub nodes: Vec<u32>,
+}
+
+/// A volume cell as read from a file, before faces are shared.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cell {
+    /// Linear tetrahedron, any orientation.
+    Tet([u32; 4]),
+    /// Hexahedron in VTK order: bottom loop 0-1-2-3, top loop 4-5-6-7.
+    Hex([u32; 8]),
+    /// General polyhedron as a list of face loops (any orientation).
+    Polyhedron(Vec<Vec<u32>>),
+}
+
+impl Cell {
+    /// The face loops of the cell in its own numbering.
+    pub fn face_loops(&self) -> Vec<Vec<u32>> {
+        match self {
+            Cell::Tet(t) => vec![
+                vec![t[0], t[2], t[1]],
+                vec![t[0], t[1], t[3]],
+                vec![t[1], t[2], t[3]],
+                vec![t[0], t[3], t[2]],
+            ],
+            Cell::Hex(h) => [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+                .iter()
+                .map(|f| f.iter().map(|&i| h[i]).collect())
+                .collect(),
+            Cell::Polyhedron(faces) => faces.clone(),
+        }
+    }
+}
+
+/// A conforming mesh of polyhedral elements.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PolyMesh {
+    /// Node rest positions in metres.
+    pub nodes: Vec<[f64; 3]>,
+    /// Global faces.
+    pub faces: Vec<Face>,
+    /// Elements.
+    pub elements: Vec<Element>,
+}
+
+/// The key under which a face loop is shared: its sorted vertex set.
+pub(crate) fn face_key(vertices: &[u32]) -> Vec<u32> {
+    let mut k = vertices.to_vec();
+    k.sort_unstable();
+    k
+}
+
+impl PolyMesh {
+    /// Builds a mesh from volume cells, sharing faces with equal vertex sets
+    /// and orienting every face reference outward.
+    ///
+    /// Structural problems (indices out of range, faces with fewer than three
+    /// distinct vertices, faces shared by more than two cells) are reported
+    /// here; geometric ones by [`PolyMesh::validate`].
+    pub fn from_cells(nodes: Vec<[f64; 3]>, cells: &[Cell]) -> Result<Self, MeshError> {
+        let n = nodes.len();
+        let mut mesh = PolyMesh { nodes, faces: Vec::new(), elements: Vec::with_capacity(cells.len()) };
+        let mut by_key: HashMap<Vec<u32>, u32> = HashMap::new();
+        let mut users: Vec<u8> = Vec::new();
+        for (e, cell) in cells.iter().enumerate() {
+            let loops = cell.face_loops();
+            let mut refs = Vec::with_capacity(loops.len());
+            for lp in loops {
+                if let Some(&bad) = lp.iter().find(|&&v| v as usize >= n) {
+                    return Err(MeshError::NodeIndexOutOfRange { element: e, index: bad as usize, nodes: n });
+                }
+                let key = face_key(&lp);
+                let distinct = {
+                    let mut d = key.clone();
+                    d.dedup();
+                    d.len()
+                };
+                if distinct < 3 || distinct != lp.len() {
+                    return Err(MeshError::DegenerateFace { element: e, vertices: lp });
+                }
+                let next = mesh.faces.len() as u32;
+                let f = *by_key.entry(key).or_insert(next);
+                if f == next {
+                    mesh.faces.push(Face { vertices: lp.clone(), triangles: Vec::new() });
+                    users.push(0);
+                }
+                users[f as usize] += 1;
+                if users[f as usize] > 2 {
+                    return Err(MeshError::FaceSharedByMoreThanTwo { face: f as usize, element: e });
+                }
+                // Same cyclic direction as the stored loop?
+                let same = same_direction(&mesh.faces[f as usize].vertices, &lp);
+                refs.push(FaceRef { face: f, outward: same });
+            }
+            mesh.elements.push(Element { faces: refs, nodes: Vec::new() });
+        }
+        for e in 0..mesh.elements.len() {
+            mesh.refresh_element_nodes(e);
+        }
+        mesh.triangulate_all();
+        mesh.orient()?;
+        Ok(mesh)
+    }
+
+    /// Number of nodes.
+    pub fn num_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Number of elements.
+    pub fn num_elements(&self) -> usize {
+        self.elements.len()
+    }
+
+    /// Recomputes the sorted node list of element `e` from its faces.
+    pub(crate) fn refresh_element_nodes(&mut self, e: usize) {
+        let mut nodes: Vec<u32> =
+            self.elements[e].faces.iter().flat_map(|r| self.faces[r.face as usize].vertices.iter().copied()).collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        self.elements[e].nodes = nodes;
+    }
+
+    /// (Re)computes the triangulation of every face.
+    pub(crate) fn triangulate_all(&mut self) {
+        for f in 0..self.faces.len() {
+            self.triangulate_face(f);
+        }
+    }
+
+    /// (Re)computes the triangulation of face `f` from its loop.
+    pub(crate) fn triangulate_face(&mut self, f: usize) {
+        let tris = triangulate_loop(&self.nodes, &self.faces[f].vertices);
+        self.faces[f].triangles = tris;
+    }
+
+    /// The oriented (outward) triangles of element `e`.
+    pub fn element_triangles(&self, e: usize) -> impl Iterator<Item = [u32; 3]> + '_ {
+        self.elements[e].faces.iter().flat_map(move |r| {
+            let out = r.outward;
+            self.faces[r.face as usize].triangles.iter().map(move |t| if out { *t } else { [t[0], t[2], t[1]] })
+        })
+    }
+
+    /// Signed volume of element `e` in m^3 (positive when its faces point
+    /// outward), by the divergence theorem over its face triangles.
+    pub fn element_volume(&self, e: usize) -> f64 {
+        let origin = self.nodes[self.elements[e].nodes[0] as usize];
+        self.element_triangles(e)
+            .map(|t| {
+                cleave_kernels::tet::signed_volume(
+                    origin,
+                    self.nodes[t[0] as usize],
+                    self.nodes[t[1] as usize],
+                    self.nodes[t[2] as usize],
+                )
+            })
+            .sum()
+    }
+
+    /// Volume centroid of element `e` (m), exact for its triangulated boundary.
+    pub fn element_centroid(&self, e: usize) -> [f64; 3] {
+        let origin = self.nodes[self.elements[e].nodes[0] as usize];
+        let mut v = 0.0;
+        let mut c = [0.0; 3];
+        for t in self.element_triangles(e) {
+            let (a, b, d) = (self.nodes[t[0] as usize], self.nodes[t[1] as usize], self.nodes[t[2] as usize]);
+            let vt = cleave_kernels::tet::signed_volume(origin, a, b, d);
+            v += vt;
+            c = add(c, scale(add(add(origin, a), add(b, d)), vt / 4.0));
+        }
+        if v == 0.0 {
+            return self.vertex_mean(e);
+        }
+        scale(c, 1.0 / v)
+    }
+
+    /// Mean of the element's vertex positions (m).
+    pub fn vertex_mean(&self, e: usize) -> [f64; 3] {
+        let nodes = &self.elements[e].nodes;
+        let s = nodes.iter().fold([0.0; 3], |acc, &n| add(acc, self.nodes[n as usize]));
+        scale(s, 1.0 / nodes.len() as f64)
+    }
+
+    /// Total volume of all elements (m^3).
+    pub fn total_volume(&self) -> f64 {
+        (0..self.elements.len()).map(|e| self.element_volume(e)).sum()
+    }
+
+    /// Whether element `e` is convex: every vertex lies on the inner side of
+    /// every face plane, up to `rel_tol` times the element's diameter.
+    pub fn is_convex(&self, e: usize, rel_tol: f64) -> bool {
+        let el = &self.elements[e];
+        let diam = self.element_diameter(e);
+        el.faces.iter().all(|r| {
+            let g = face_geometry(&self.nodes, &self.faces[r.face as usize].vertices);
+            let n = if r.outward { g.normal } else { scale(g.normal, -1.0) };
+            el.nodes.iter().all(|&v| cleave_kernels::vec3::dot(sub(self.nodes[v as usize], g.centroid), n) <= rel_tol * diam)
+        })
+    }
+
+    /// Largest distance between two nodes of element `e` (m).
+    pub fn element_diameter(&self, e: usize) -> f64 {
+        let nodes = &self.elements[e].nodes;
+        let mut d2: f64 = 0.0;
+        for (i, &a) in nodes.iter().enumerate() {
+            for &b in &nodes[i + 1..] {
+                let d = sub(self.nodes[a as usize], self.nodes[b as usize]);
+                d2 = d2.max(cleave_kernels::vec3::dot(d, d));
+            }
+        }
+        d2.sqrt()
+    }
+
+    /// Axis-aligned bounding box `(min, max)` of the nodes (m).
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &self.nodes {
+            for i in 0..3 {
+                lo[i] = lo[i].min(p[i]);
+                hi[i] = hi[i].max(p[i]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Element counts keyed by vertex count, in increasing vertex count.
+    pub fn count_by_vertex_count(&self) -> std::collections::BTreeMap<usize, usize> {
+        let mut m = std::collections::BTreeMap::new();
+        for el in &self.elements {
+            *m.entry(el.nodes.len()).or_insert(0) += 1;
+        }
+        m
+    }
+
+    /// Adjacency tables (face -> elements, node -> elements, edge -> faces).
+    pub fn adjacency(&self) -> Adjacency {
+        Adjacency::new(self)
+    }
+}
+
+/// Whether two loops over the same vertex set run in the same cyclic direction.
+fn same_direction(a: &[u32], b: &[u32]) -> bool {
+    let n = a.len();
+    let Some(start) = b.iter().position(|&v| v == a[0]) else { return true };
+    b[(start + 1) % n] == a[1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub(crate) fn unit_tet() -> PolyMesh {
+        let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3])]).unwrap()
+    }
+
+    #[test]
+    fn tet_volume_and_centroid() {
+        let m = unit_tet();
+        assert!((m.element_volume(0) - 1.0 / 6.0).abs() < 1e-15);
+        let c = m.element_centroid(0);
+        for x in c {
+            assert!((x - 0.25).abs() < 1e-15);
+        }
+        assert!(m.is_convex(0, 1e-9));
+    }
+
+    #[test]
+    fn inverted_tet_is_oriented_outward() {
+        let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let m = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 2, 1, 3])]).unwrap();
+        assert!((m.element_volume(0) - 1.0 / 6.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn two_tets_share_one_face() {
+        let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]];
+        let m = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([1, 2, 3, 4])]).unwrap();
+        assert_eq!(m.faces.len(), 7);
+        let shared: Vec<_> = m.elements[0].faces.iter().filter(|r| m.elements[1].faces.iter().any(|s| s.face == r.face)).collect();
+        assert_eq!(shared.len(), 1);
+        let other = m.elements[1].faces.iter().find(|s| s.face == shared[0].face).unwrap();
+        assert_ne!(shared[0].outward, other.outward);
+    }
+}

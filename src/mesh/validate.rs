@@ -1,0 +1,430 @@
+//! Mesh validation, orientation repair and node welding.
+//!
+//! [`PolyMesh::validate`] stops at the first problem; [`PolyMesh::check`]
+//! lists them all (for `cleave info`). Every error names the problem and the
+//! place (node, face or element id, zero-based).
+
+use std::collections::HashMap;
+
+use cleave_kernels::vec3::{dot, sub};
+use thiserror::Error;
+
+use super::{face_geometry, Cell, PolyMesh};
+
+/// A structural or geometric defect of a mesh.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum MeshError {
+    /// The mesh has no element.
+    #[error("the mesh has no elements")]
+    Empty,
+    /// A box generator was given an empty box or zero cells.
+    #[error("a generated box needs min < max on every axis and at least one cell per axis (min {min:?}, max {max:?}, cells {cells:?})")]
+    InvalidBox { min: [f64; 3], max: [f64; 3], cells: [usize; 3] },
+    /// A node coordinate is NaN or infinite.
+    #[error("node {node} has a non-finite coordinate {position:?}")]
+    NonFiniteNode { node: usize, position: [f64; 3] },
+    /// A cell refers to a node that does not exist.
+    #[error("element {element} refers to node {index}, but the mesh has {nodes} nodes")]
+    NodeIndexOutOfRange { element: usize, index: usize, nodes: usize },
+    /// An element refers to a face that does not exist.
+    #[error("element {element} refers to face {index}, but the mesh has {faces} faces")]
+    FaceIndexOutOfRange { element: usize, index: usize, faces: usize },
+    /// A face loop repeats a vertex or has fewer than three.
+    #[error("element {element} has a face with fewer than 3 distinct vertices or a repeated vertex: {vertices:?}")]
+    DegenerateFace { element: usize, vertices: Vec<u32> },
+    /// A face has (almost) no area.
+    #[error("face {face} has zero area")]
+    ZeroAreaFace { face: usize },
+    /// A face's vertices are not in one plane.
+    #[error("face {face} is not planar: a vertex is {deviation:.3e} m off its plane, more than {tolerance:.1e} of the face size")]
+    NonPlanarFace { face: usize, deviation: f64, tolerance: f64 },
+    /// An element's boundary is not closed.
+    #[error("element {element} is not closed: edge ({}, {}) is used by {count} of its faces instead of 2", .edge.0, .edge.1)]
+    OpenElement { element: usize, edge: (u32, u32), count: usize },
+    /// Two faces of an element traverse a shared edge in the same direction.
+    #[error("element {element} has inconsistently oriented faces along edge ({}, {}) (fix with PolyMesh::orient)", .edge.0, .edge.1)]
+    InconsistentOrientation { element: usize, edge: (u32, u32) },
+    /// An element's faces are consistently oriented but point inward.
+    #[error("element {element} has inward-pointing faces (fix with PolyMesh::orient)")]
+    InwardElement { element: usize },
+    /// An element encloses no volume or is inside out.
+    #[error("element {element} has non-positive volume {volume:.3e} m^3")]
+    NonPositiveVolume { element: usize, volume: f64 },
+    /// Two nodes are at (almost) the same place.
+    #[error("nodes {a} and {b} are duplicates ({distance:.3e} m apart; fix with PolyMesh::weld)")]
+    DuplicateNodes { a: usize, b: usize, distance: f64 },
+    /// A face bounds more than two elements.
+    #[error("face {face} is shared by more than two elements (element {element} is the third)")]
+    FaceSharedByMoreThanTwo { face: usize, element: usize },
+    /// The two elements on an interior face both claim it points out of them.
+    #[error("face {face} is oriented outward for both elements {a} and {b}: they overlap")]
+    OverlappingElements { face: usize, a: usize, b: usize },
+}
+
+/// Tolerances of [`PolyMesh::validate`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidationOptions {
+    /// A face is planar when every vertex is within `planarity` times the
+    /// face's diameter of its best plane. Default `1e-3`: cutting snaps nodes
+    /// that lie within `1e-4` of an edge length to a cut plane, and such caps
+    /// stay well inside this bound.
+    pub planarity: f64,
+    /// Two nodes closer than `duplicate` times the bounding box diagonal are
+    /// duplicates. Default `1e-9`.
+    pub duplicate: f64,
+}
+
+impl Default for ValidationOptions {
+    fn default() -> Self {
+        ValidationOptions { planarity: 1e-3, duplicate: 1e-9 }
+    }
+}
+
+impl PolyMesh {
+    /// Returns the first defect found, checking nodes, faces, then elements.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        match self.check(&ValidationOptions::default(), 1).into_iter().next() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Lists up to `limit` defects with the given tolerances.
+    pub fn check(&self, opts: &ValidationOptions, limit: usize) -> Vec<MeshError> {
+        let mut out = Vec::new();
+        macro_rules! push {
+            ($e:expr) => {{
+                out.push($e);
+                if out.len() >= limit {
+                    return out;
+                }
+            }};
+        }
+        if self.elements.is_empty() {
+            push!(MeshError::Empty);
+        }
+        for (i, p) in self.nodes.iter().enumerate() {
+            if !p.iter().all(|x| x.is_finite()) {
+                push!(MeshError::NonFiniteNode { node: i, position: *p });
+            }
+        }
+        if !out.is_empty() {
+            return out; // geometry below would be meaningless
+        }
+        let mut users = vec![0usize; self.faces.len()];
+        for (e, el) in self.elements.iter().enumerate() {
+            for r in &el.faces {
+                if r.face as usize >= self.faces.len() {
+                    push!(MeshError::FaceIndexOutOfRange { element: e, index: r.face as usize, faces: self.faces.len() });
+                    continue;
+                }
+                users[r.face as usize] += 1;
+                if users[r.face as usize] == 3 {
+                    push!(MeshError::FaceSharedByMoreThanTwo { face: r.face as usize, element: e });
+                }
+            }
+        }
+        for (f, face) in self.faces.iter().enumerate() {
+            if let Some(&bad) = face.vertices.iter().find(|&&v| v as usize >= self.nodes.len()) {
+                let element = self.elements.iter().position(|el| el.faces.iter().any(|r| r.face as usize == f)).unwrap_or(0);
+                push!(MeshError::NodeIndexOutOfRange { element, index: bad as usize, nodes: self.nodes.len() });
+                continue;
+            }
+            let g = face_geometry(&self.nodes, &face.vertices);
+            if g.area <= 1e-14 * g.diameter * g.diameter || g.area == 0.0 {
+                push!(MeshError::ZeroAreaFace { face: f });
+            } else if g.max_deviation > opts.planarity * g.diameter {
+                push!(MeshError::NonPlanarFace { face: f, deviation: g.max_deviation, tolerance: opts.planarity });
+            }
+        }
+        for e in 0..self.elements.len() {
+            if let Err(err) = self.check_element_closed(e) {
+                push!(err);
+                continue;
+            }
+            let v = self.element_volume(e);
+            if v < 0.0 && v.abs() > 0.0 {
+                push!(MeshError::InwardElement { element: e });
+            } else if v.is_nan() || v <= 0.0 {
+                push!(MeshError::NonPositiveVolume { element: e, volume: v });
+            }
+        }
+        let mut owner: Vec<Option<(usize, bool)>> = vec![None; self.faces.len()];
+        for (e, el) in self.elements.iter().enumerate() {
+            for r in &el.faces {
+                let Some(slot) = owner.get_mut(r.face as usize) else { continue };
+                match *slot {
+                    None => *slot = Some((e, r.outward)),
+                    Some((a, out)) if out == r.outward => {
+                        push!(MeshError::OverlappingElements { face: r.face as usize, a, b: e })
+                    }
+                    _ => {}
+                }
+            }
+        }
+        for (a, b, distance) in self.duplicate_nodes(opts.duplicate) {
+            push!(MeshError::DuplicateNodes { a, b, distance });
+        }
+        out
+    }
+
+    /// Checks that every edge of element `e` is used by exactly two of its
+    /// faces in opposite directions.
+    fn check_element_closed(&self, e: usize) -> Result<(), MeshError> {
+        let mut uses: HashMap<(u32, u32), (usize, i32)> = HashMap::new();
+        for r in &self.elements[e].faces {
+            let v = &self.faces[r.face as usize].vertices;
+            for i in 0..v.len() {
+                let (mut a, mut b) = (v[i], v[(i + 1) % v.len()]);
+                if !r.outward {
+                    std::mem::swap(&mut a, &mut b);
+                }
+                let entry = uses.entry((a.min(b), a.max(b))).or_insert((0, 0));
+                entry.0 += 1;
+                entry.1 += if a < b { 1 } else { -1 };
+            }
+        }
+        let mut edges: Vec<_> = uses.into_iter().collect();
+        edges.sort_unstable_by_key(|(k, _)| *k);
+        for (edge, (count, balance)) in edges {
+            if count != 2 {
+                return Err(MeshError::OpenElement { element: e, edge, count });
+            }
+            if balance != 0 {
+                return Err(MeshError::InconsistentOrientation { element: e, edge });
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes every element's face references consistent and outward.
+    ///
+    /// Fails when an element is not closed or encloses no volume, or when
+    /// two elements overlap across a face.
+    pub fn orient(&mut self) -> Result<(), MeshError> {
+        for e in 0..self.elements.len() {
+            self.orient_element(e)?;
+        }
+        let mut owner: Vec<Option<(usize, bool)>> = vec![None; self.faces.len()];
+        for (e, el) in self.elements.iter().enumerate() {
+            for r in &el.faces {
+                match owner[r.face as usize] {
+                    None => owner[r.face as usize] = Some((e, r.outward)),
+                    Some((a, out)) if out == r.outward => {
+                        return Err(MeshError::OverlappingElements { face: r.face as usize, a, b: e })
+                    }
+                    _ => {}
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn orient_element(&mut self, e: usize) -> Result<(), MeshError> {
+        let refs = self.elements[e].faces.clone();
+        // edge -> faces (local indices) that contain it
+        let mut edge_faces: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+        for (k, r) in refs.iter().enumerate() {
+            let v = &self.faces[r.face as usize].vertices;
+            for i in 0..v.len() {
+                let (a, b) = (v[i], v[(i + 1) % v.len()]);
+                edge_faces.entry((a.min(b), a.max(b))).or_default().push(k);
+            }
+        }
+        let mut sorted: Vec<_> = edge_faces.iter().collect();
+        sorted.sort_unstable_by_key(|(k, _)| **k);
+        for (edge, fs) in &sorted {
+            if fs.len() != 2 {
+                return Err(MeshError::OpenElement { element: e, edge: **edge, count: fs.len() });
+            }
+        }
+        // Breadth-first flip propagation: neighbours must traverse the shared
+        // edge in opposite directions.
+        let dir = |mesh: &PolyMesh, k: usize, flip: bool, a: u32, b: u32| -> bool {
+            let v = &mesh.faces[refs[k].face as usize].vertices;
+            let n = v.len();
+            let i = v.iter().position(|&x| x == a).expect("edge vertex in loop");
+            let forward = v[(i + 1) % n] == b;
+            forward != flip
+        };
+        let mut flip: Vec<Option<bool>> = vec![None; refs.len()];
+        flip[0] = Some(!refs[0].outward);
+        let mut queue = vec![0usize];
+        while let Some(k) = queue.pop() {
+            let v = self.faces[refs[k].face as usize].vertices.clone();
+            for i in 0..v.len() {
+                let (a, b) = (v[i], v[(i + 1) % v.len()]);
+                for &other in &edge_faces[&(a.min(b), a.max(b))] {
+                    if other == k {
+                        continue;
+                    }
+                    let mine = dir(self, k, flip[k].unwrap(), a, b);
+                    let want_flip_other = {
+                        let theirs_unflipped = dir(self, other, false, a, b);
+                        theirs_unflipped == mine
+                    };
+                    match flip[other] {
+                        None => {
+                            flip[other] = Some(want_flip_other);
+                            queue.push(other);
+                        }
+                        Some(f) if f != want_flip_other => {
+                            return Err(MeshError::InconsistentOrientation { element: e, edge: (a.min(b), a.max(b)) });
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        for (k, r) in self.elements[e].faces.iter_mut().enumerate() {
+            // flip[k] == true means the loop runs against the element's chosen orientation
+            r.outward = !flip[k].unwrap_or(false);
+        }
+        let v = self.element_volume(e);
+        if v < 0.0 {
+            for r in self.elements[e].faces.iter_mut() {
+                r.outward = !r.outward;
+            }
+        } else if v == 0.0 || v.is_nan() {
+            return Err(MeshError::NonPositiveVolume { element: e, volume: v });
+        }
+        Ok(())
+    }
+
+    /// Pairs of nodes closer than `rel_tol` times the bounding box diagonal,
+    /// as `(lower id, higher id, distance)`, found with a hash grid.
+    pub fn duplicate_nodes(&self, rel_tol: f64) -> Vec<(usize, usize, f64)> {
+        let (lo, hi) = self.bounding_box();
+        let diag = cleave_kernels::vec3::norm(sub(hi, lo));
+        let tol = rel_tol * diag;
+        if !(tol > 0.0) {
+            return Vec::new();
+        }
+        let cell = |p: [f64; 3]| -> [i64; 3] { [0, 1, 2].map(|i| ((p[i] - lo[i]) / tol).floor() as i64) };
+        let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, p) in self.nodes.iter().enumerate() {
+            grid.entry(cell(*p)).or_default().push(i);
+        }
+        let mut out = Vec::new();
+        for (i, p) in self.nodes.iter().enumerate() {
+            let c = cell(*p);
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                            for &j in list {
+                                if j > i {
+                                    let d = sub(self.nodes[j], *p);
+                                    let dist = dot(d, d).sqrt();
+                                    if dist <= tol {
+                                        out.push((i, j, dist));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out.sort_by_key(|&(a, b, _)| (a, b));
+        out
+    }
+
+    /// Merges nodes closer than `rel_tol` times the bounding box diagonal into
+    /// the lowest id among them, drops nodes no element uses, and re-shares
+    /// faces that became equal. Returns the new id of every old node
+    /// (`u32::MAX` for a dropped one).
+    pub fn weld(&mut self, rel_tol: f64) -> Result<Vec<u32>, MeshError> {
+        let mut target: Vec<usize> = (0..self.nodes.len()).collect();
+        for (a, b, _) in self.duplicate_nodes(rel_tol) {
+            let root = |t: &[usize], mut x: usize| {
+                while t[x] != x {
+                    x = t[x];
+                }
+                x
+            };
+            let (ra, rb) = (root(&target, a), root(&target, b));
+            target[ra.max(rb)] = ra.min(rb);
+        }
+        for i in 0..target.len() {
+            target[i] = target[target[i]];
+        }
+        let cells: Vec<Cell> = self
+            .elements
+            .iter()
+            .map(|el| {
+                Cell::Polyhedron(
+                    el.faces
+                        .iter()
+                        .map(|r| {
+                            let mut lp: Vec<u32> =
+                                self.faces[r.face as usize].vertices.iter().map(|&v| target[v as usize] as u32).collect();
+                            lp.dedup();
+                            if lp.len() > 1 && lp.first() == lp.last() {
+                                lp.pop();
+                            }
+                            lp
+                        })
+                        .filter(|lp| lp.len() >= 3)
+                        .collect(),
+                )
+            })
+            .collect();
+        let mut used = vec![false; self.nodes.len()];
+        for c in &cells {
+            if let Cell::Polyhedron(fs) = c {
+                for &v in fs.iter().flatten() {
+                    used[v as usize] = true;
+                }
+            }
+        }
+        let mut new_id = vec![u32::MAX; self.nodes.len()];
+        let mut nodes = Vec::new();
+        for (i, p) in self.nodes.iter().enumerate() {
+            if used[i] {
+                new_id[i] = nodes.len() as u32;
+                nodes.push(*p);
+            }
+        }
+        let cells: Vec<Cell> = cells
+            .into_iter()
+            .map(|c| match c {
+                Cell::Polyhedron(fs) => {
+                    Cell::Polyhedron(fs.into_iter().map(|lp| lp.into_iter().map(|v| new_id[v as usize]).collect()).collect())
+                }
+                other => other,
+            })
+            .collect();
+        *self = PolyMesh::from_cells(nodes, &cells)?;
+        Ok((0..target.len()).map(|i| new_id[target[i]]).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::Cell;
+    use super::*;
+
+    #[test]
+    fn weld_joins_two_tets_into_shared_face() {
+        // two tets sharing a face, but with the face's nodes duplicated
+        let nodes = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+        ];
+        let mut m = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([4, 5, 6, 7])]).unwrap();
+        assert_eq!(m.faces.len(), 8);
+        assert!(matches!(m.validate(), Err(MeshError::DuplicateNodes { a: 1, b: 4, .. })));
+        let map = m.weld(1e-9).unwrap();
+        assert_eq!(map[4], 1);
+        assert_eq!(m.nodes.len(), 5);
+        assert_eq!(m.faces.len(), 7);
+        m.validate().unwrap();
+    }
+}

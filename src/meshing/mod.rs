@@ -1,0 +1,8 @@
+//! Mesh generators: boxes of hexahedra or tetrahedra, and boxes cut into
+//! random convex cells.
+
+mod box_grid;
+mod random_convex;
+
+pub use box_grid::{box_hex, box_tet};
+pub use random_convex::random_convex;

@@ -1,0 +1,141 @@
+//! Frames (VTU, OBJ) and the run summary (`summary.json`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::io::{write_boundary_obj, write_vtu, IoError, VtuFields};
+use crate::scene::Format;
+use crate::sim::{PhaseTimings, Simulation};
+
+/// Writes frame `index` of `sim` in `formats` into `dir`
+/// (`frame_NNNN.vtu`, `frame_NNNN.obj`). Points are the deformed positions;
+/// `displacement` lets a reader recover the rest ones.
+pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format]) -> Result<(), IoError> {
+    let positions = sim.positions();
+    for f in formats {
+        match f {
+            Format::Vtu => {
+                let mesh = sim.mesh();
+                let ids: Vec<i64> = (0..mesh.elements.len() as i64).collect();
+                let counts: Vec<i64> = mesh.elements.iter().map(|e| e.nodes.len() as i64).collect();
+                let vm = sim.von_mises();
+                let fields = VtuFields {
+                    point_vectors: vec![("displacement", sim.displacements()), ("velocity", sim.velocities())],
+                    cell_scalars: vec![("von_mises", &vm)],
+                    cell_ints: vec![("element_id", &ids), ("vertex_count", &counts)],
+                };
+                write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, &positions, &fields)?;
+            }
+            Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), &positions)?,
+            Format::Png => {
+                return Err(IoError::Unsupported { path: dir.to_path_buf(), message: "png output is not implemented".into() })
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Mean and maximum of a per-step quantity.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct MeanMax {
+    /// Mean over steps.
+    pub mean: f64,
+    /// Maximum over steps.
+    pub max: f64,
+}
+
+impl MeanMax {
+    /// Statistics of `values` (zeros when empty).
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Self {
+        let (mut n, mut sum, mut max) = (0usize, 0.0, f64::NEG_INFINITY);
+        for v in values {
+            n += 1;
+            sum += v;
+            max = max.max(v);
+        }
+        if n == 0 {
+            return MeanMax::default();
+        }
+        MeanMax { mean: sum / n as f64, max }
+    }
+}
+
+/// Solver statistics of a run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SolverSummary {
+    /// `"cholesky"` or `"cg"`.
+    pub kind: String,
+    /// Iterations per solve.
+    pub iterations: MeanMax,
+    /// Relative residual per solve.
+    pub residual: MeanMax,
+}
+
+/// Mesh counts at one moment.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct MeshCounts {
+    /// Nodes.
+    pub nodes: usize,
+    /// Elements.
+    pub elements: usize,
+    /// Elements by vertex count.
+    pub elements_by_vertex_count: BTreeMap<usize, usize>,
+    /// Total volume (m^3).
+    pub volume: f64,
+}
+
+/// Everything `summary.json` holds.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Summary {
+    /// The scene file.
+    pub scene: String,
+    /// `"static"` or `"dynamic"`.
+    pub mode: String,
+    /// Worker threads used.
+    pub threads: usize,
+    /// Mesh at the start.
+    pub start: MeshCounts,
+    /// Mesh at the end.
+    pub end: MeshCounts,
+    /// Connected components at the end.
+    pub components_end: usize,
+    /// Steps run (1 for a static solve).
+    pub steps: usize,
+    /// Wall time by phase (s).
+    pub wall_time: PhaseTimings,
+    /// Total wall time (s).
+    pub wall_time_total: f64,
+    /// Mean wall time per step (ms).
+    pub ms_per_step: f64,
+    /// Largest nodal displacement magnitude (m).
+    pub max_displacement: f64,
+    /// Final elastic energy (J).
+    pub elastic_energy: f64,
+    /// Final kinetic energy (J).
+    pub kinetic_energy: f64,
+    /// Solver statistics.
+    pub solver: SolverSummary,
+    /// Frames written.
+    pub frames: usize,
+}
+
+impl MeshCounts {
+    /// Counts of `sim`'s mesh.
+    pub fn of(sim: &Simulation) -> Self {
+        let mesh = sim.mesh();
+        MeshCounts {
+            nodes: mesh.nodes.len(),
+            elements: mesh.elements.len(),
+            elements_by_vertex_count: mesh.count_by_vertex_count(),
+            volume: mesh.total_volume(),
+        }
+    }
+}
+
+/// Writes `summary` as pretty JSON to `path`.
+pub fn write_summary(path: &Path, summary: &Summary) -> Result<(), IoError> {
+    let text = serde_json::to_string_pretty(summary).expect("summary serialises");
+    crate::io::write_text(path, &text)
+}

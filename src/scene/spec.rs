@@ -1,0 +1,476 @@
+//! The scene schema (`DESIGN.md`, "The scene file and the CLI").
+
+use serde::Deserialize;
+
+use super::{LoadedScene, SceneError};
+use crate::material::Material;
+
+/// A whole scene.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Where the mesh comes from.
+    pub mesh: MeshSpec,
+    /// How a surface mesh is filled with elements.
+    pub meshing: Option<MeshingSpec>,
+    /// Material constants.
+    pub material: MaterialSpec,
+    /// Shape function family.
+    #[serde(default)]
+    pub basis: BasisSpec,
+    /// Time stepping.
+    #[serde(default)]
+    pub simulation: SimulationSpec,
+    /// Linear solver.
+    #[serde(default)]
+    pub solver: SolverSpec,
+    /// Dirichlet boxes.
+    #[serde(default)]
+    pub fixed: Vec<FixedSpec>,
+    /// Penalty collision planes.
+    #[serde(default)]
+    pub collider: Vec<ColliderSpec>,
+    /// Cuts during the run.
+    #[serde(default)]
+    pub cut: Vec<CutSpec>,
+    /// Adaptive refinement rules.
+    #[serde(default)]
+    pub refine: Vec<RefineSpec>,
+    /// Output files.
+    #[serde(default)]
+    pub output: OutputSpec,
+}
+
+/// `[mesh]`: a file, or a generator.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSpec {
+    /// Mesh file (relative to the scene).
+    pub file: Option<String>,
+    /// Generator name (`"box"`).
+    pub generator: Option<Generator>,
+    /// Box corner (m).
+    pub min: Option<[f64; 3]>,
+    /// Box corner (m).
+    pub max: Option<[f64; 3]>,
+    /// Cells per axis.
+    pub cells: Option<[usize; 3]>,
+    /// Element kind of a generated box.
+    pub element: Option<BoxElement>,
+    /// Number of random planes (`random-convex`).
+    pub planes: Option<usize>,
+    /// Random seed (`random-convex`).
+    pub seed: Option<u64>,
+}
+
+/// Mesh generators.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Generator {
+    /// An axis-aligned box.
+    Box,
+}
+
+/// Element kinds of a generated box.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoxElement {
+    /// Hexahedra.
+    Hex,
+    /// Tetrahedra, six per cube.
+    Tet,
+    /// The box cut by random planes into convex cells.
+    RandomConvex,
+}
+
+/// `[meshing]` for surface input.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MeshingSpec {
+    /// `"grid-slice"` or `"octree"`.
+    pub method: String,
+    /// Cell size (m).
+    pub cell: Option<f64>,
+    /// Octree depth.
+    pub max_depth: Option<usize>,
+}
+
+/// `[material]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    /// Young's modulus (Pa).
+    pub young: f64,
+    /// Poisson's ratio.
+    pub poisson: f64,
+    /// Density (kg/m^3).
+    pub density: f64,
+}
+
+/// `[basis]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BasisSpec {
+    /// Shape function family.
+    #[serde(default)]
+    pub family: Family,
+    /// DG polynomial degree (1 or 2).
+    pub degree: Option<usize>,
+    /// DG flux.
+    pub flux: Option<Flux>,
+}
+
+impl Default for BasisSpec {
+    fn default() -> Self {
+        BasisSpec { family: Family::MeanValue, degree: None, flux: None }
+    }
+}
+
+/// Shape function families.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Family {
+    /// Mean value coordinates (linear on tetrahedra).
+    #[default]
+    MeanValue,
+    /// Harmonic coordinates by the method of fundamental solutions.
+    Harmonic,
+    /// Discontinuous Galerkin.
+    Dg,
+}
+
+/// DG fluxes.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Flux {
+    /// Interior penalty.
+    Ip,
+    /// Bassi–Rebay / Brezzi (BZ).
+    Bz,
+}
+
+/// `[simulation]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSpec {
+    /// Static or dynamic.
+    #[serde(default)]
+    pub mode: Mode,
+    /// Time step (s).
+    #[serde(default = "default_dt")]
+    pub dt: f64,
+    /// Number of steps.
+    #[serde(default = "default_steps")]
+    pub steps: usize,
+    /// Gravity (m/s^2).
+    #[serde(default = "default_gravity")]
+    pub gravity: [f64; 3],
+    /// Stiffness warping.
+    #[serde(default = "default_true")]
+    pub corotated: bool,
+    /// Rayleigh damping.
+    #[serde(default)]
+    pub damping: DampingSpec,
+}
+
+fn default_dt() -> f64 {
+    0.01
+}
+fn default_steps() -> usize {
+    200
+}
+fn default_gravity() -> [f64; 3] {
+    [0.0, 0.0, -9.81]
+}
+fn default_true() -> bool {
+    true
+}
+
+impl Default for SimulationSpec {
+    fn default() -> Self {
+        SimulationSpec {
+            mode: Mode::Static,
+            dt: default_dt(),
+            steps: default_steps(),
+            gravity: default_gravity(),
+            corotated: true,
+            damping: DampingSpec::default(),
+        }
+    }
+}
+
+/// Simulation modes.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// One linear static solve.
+    #[default]
+    Static,
+    /// Implicit Euler time stepping.
+    Dynamic,
+}
+
+/// Rayleigh damping `D = mass M + stiffness K`.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DampingSpec {
+    /// Mass-proportional coefficient (1/s).
+    #[serde(default)]
+    pub mass: f64,
+    /// Stiffness-proportional coefficient (s).
+    #[serde(default)]
+    pub stiffness: f64,
+}
+
+/// `[solver]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSpec {
+    /// Direct or iterative.
+    #[serde(default)]
+    pub kind: SolverKind,
+    /// Relative residual tolerance of iterative solvers.
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+}
+
+fn default_tolerance() -> f64 {
+    1e-8
+}
+
+impl Default for SolverSpec {
+    fn default() -> Self {
+        SolverSpec { kind: SolverKind::Cholesky, tolerance: default_tolerance() }
+    }
+}
+
+/// Linear solvers.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverKind {
+    /// Sparse Cholesky.
+    #[default]
+    Cholesky,
+    /// Preconditioned conjugate gradients.
+    Cg,
+}
+
+/// An axis-aligned box.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSpec {
+    /// Corner (m).
+    pub min: [f64; 3],
+    /// Corner (m).
+    pub max: [f64; 3],
+}
+
+/// `[[fixed]]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FixedSpec {
+    /// Nodes inside (boundary included) are prescribed.
+    #[serde(rename = "box")]
+    pub region: BoxSpec,
+    /// Constant displacement (m).
+    #[serde(default)]
+    pub displacement: [f64; 3],
+    /// Displacement gradient (dimensionless), applied to rest positions.
+    #[serde(default)]
+    pub gradient: [[f64; 3]; 3],
+}
+
+/// A plane in a scene.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneSpec {
+    /// A point on it (m).
+    pub point: [f64; 3],
+    /// Its normal.
+    pub normal: [f64; 3],
+}
+
+/// `[[collider]]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ColliderSpec {
+    /// The collision plane; its normal points into the free half-space.
+    pub plane: PlaneSpec,
+    /// Penalty stiffness (N/m).
+    pub stiffness: f64,
+}
+
+/// `[[cut]]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CutSpec {
+    /// Step at which the cut happens.
+    pub step: usize,
+    /// A planar cut polygon (m).
+    pub polygon: Option<Vec<[f64; 3]>>,
+    /// A full split plane.
+    pub plane: Option<PlaneSpec>,
+}
+
+/// `[[refine]]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RefineSpec {
+    /// Refinement criterion (`"stress"`).
+    pub criterion: String,
+    /// Threshold (Pa for stress).
+    pub threshold: f64,
+    /// `"1-to-2"` or `"1-to-8"`.
+    pub split: String,
+}
+
+/// `[output]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// Output folder (relative to the scene file).
+    pub dir: Option<String>,
+    /// Write a frame every this many steps.
+    #[serde(default = "default_every")]
+    pub every: usize,
+    /// Frame formats.
+    #[serde(default = "default_formats")]
+    pub formats: Vec<Format>,
+}
+
+fn default_every() -> usize {
+    1
+}
+fn default_formats() -> Vec<Format> {
+    vec![Format::Vtu]
+}
+
+impl Default for OutputSpec {
+    fn default() -> Self {
+        OutputSpec { dir: None, every: 1, formats: default_formats() }
+    }
+}
+
+/// Frame formats.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Format {
+    /// VTK unstructured grid with polyhedron cells.
+    Vtu,
+    /// Boundary surface as OBJ.
+    Obj,
+    /// Rendered snapshot.
+    Png,
+}
+
+fn finite3(v: &[f64; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+impl Scene {
+    /// Range checks of every value; errors name the key and its line.
+    pub(crate) fn check(&self, s: &LoadedScene) -> Result<(), SceneError> {
+        let m = &self.mesh;
+        match (&m.file, &m.generator) {
+            (Some(_), Some(_)) => return Err(s.invalid("mesh.generator", "…", "give either mesh.file or mesh.generator, not both")),
+            (None, None) => return Err(s.invalid("mesh", "{}", "needs mesh.file or mesh.generator")),
+            (None, Some(Generator::Box)) => {
+                let (Some(min), Some(max)) = (m.min, m.max) else {
+                    return Err(s.invalid("mesh", "box", "a box generator needs min = [x, y, z] and max = [x, y, z]"));
+                };
+                if !finite3(&min) || !finite3(&max) || (0..3).any(|i| min[i] >= max[i]) {
+                    return Err(s.invalid("mesh.max", format!("{max:?}"), "must be finite and greater than mesh.min on every axis (m)"));
+                }
+                match m.element {
+                    None => return Err(s.invalid("mesh", "box", "a box generator needs element = \"hex\" | \"tet\" | \"random-convex\"")),
+                    Some(BoxElement::RandomConvex) => {
+                        let planes = m.planes.unwrap_or(8);
+                        if planes > 10_000 {
+                            return Err(s.invalid("mesh.planes", planes, "must be at most 10000"));
+                        }
+                    }
+                    Some(_) => {
+                        let cells = m.cells.unwrap_or([1; 3]);
+                        if cells.contains(&0) || cells.iter().product::<usize>() > 50_000_000 {
+                            return Err(s.invalid(
+                                "mesh.cells",
+                                format!("{cells:?}"),
+                                "needs at least 1 cell per axis and at most 5e7 cells",
+                            ));
+                        }
+                    }
+                }
+            }
+            (Some(_), None) => {}
+        }
+        if self.meshing.is_some() {
+            return Err(s.unsupported("meshing", "meshing surfaces into elements is not implemented yet"));
+        }
+        let mat = &self.material;
+        Material::new(mat.young, mat.poisson, mat.density)
+            .map_err(|e| s.invalid(&format!("material.{}", e.name), e.value, e.allowed))?;
+        match self.basis.family {
+            Family::MeanValue => {}
+            Family::Harmonic | Family::Dg => {
+                return Err(s.unsupported("basis.family", "only \"mean-value\" (linear on tetrahedra) is implemented yet"))
+            }
+        }
+        if self.basis.degree.is_some() || self.basis.flux.is_some() {
+            return Err(s.invalid("basis.degree", "…", "degree and flux apply to family = \"dg\" only"));
+        }
+        let sim = &self.simulation;
+        if !(sim.dt > 0.0 && sim.dt.is_finite()) {
+            return Err(s.invalid("simulation.dt", sim.dt, "must be a finite number > 0 (s)"));
+        }
+        if !finite3(&sim.gravity) {
+            return Err(s.invalid("simulation.gravity", format!("{:?}", sim.gravity), "must be finite (m/s^2)"));
+        }
+        for (name, v) in [("mass", sim.damping.mass), ("stiffness", sim.damping.stiffness)] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(s.invalid("simulation.damping", v, &format!("damping.{name} must be a finite number >= 0")));
+            }
+        }
+        if sim.mode == Mode::Dynamic {
+            return Err(s.unsupported("simulation.mode", "dynamic simulation is not implemented yet; use mode = \"static\""));
+        }
+        if !(self.solver.tolerance > 0.0 && self.solver.tolerance < 1.0) {
+            return Err(s.invalid("solver.tolerance", self.solver.tolerance, "must lie in (0, 1)"));
+        }
+        if self.solver.kind == SolverKind::Cg {
+            return Err(s.unsupported("solver.kind", "the CG solver is not implemented yet; use kind = \"cholesky\""));
+        }
+        for (i, f) in self.fixed.iter().enumerate() {
+            let b = &f.region;
+            if !finite3(&b.min) || !finite3(&b.max) || (0..3).any(|k| b.min[k] > b.max[k]) {
+                return Err(s.invalid(&format!("fixed.{i}.box"), format!("{b:?}"), "min and max must be finite with min <= max (m)"));
+            }
+            if !finite3(&f.displacement) {
+                return Err(s.invalid(&format!("fixed.{i}.displacement"), format!("{:?}", f.displacement), "must be finite (m)"));
+            }
+            if !f.gradient.iter().all(finite3) {
+                return Err(s.invalid(&format!("fixed.{i}.gradient"), format!("{:?}", f.gradient), "must be finite"));
+            }
+        }
+        if !self.collider.is_empty() {
+            return Err(s.unsupported("collider", "collisions are not implemented yet"));
+        }
+        if !self.cut.is_empty() {
+            return Err(s.unsupported("cut", "cutting is not implemented yet"));
+        }
+        if !self.refine.is_empty() {
+            return Err(s.unsupported("refine", "refinement is not implemented yet"));
+        }
+        if self.output.every == 0 {
+            return Err(s.invalid("output.every", 0, "must be at least 1"));
+        }
+        if self.output.formats.contains(&Format::Png) {
+            return Err(s.unsupported("output.formats", "png snapshots are not implemented yet; use \"vtu\" and \"obj\""));
+        }
+        Ok(())
+    }
+
+    /// The material of the scene (range-checked at load).
+    pub fn material(&self) -> Material {
+        Material { young: self.material.young, poisson: self.material.poisson, density: self.material.density }
+    }
+}

@@ -1,0 +1,6 @@
+//! Topology changes of a [`crate::mesh::PolyMesh`]: plane splits (and, built
+//! on them, cuts, sliver merges and refinement).
+
+mod split;
+
+pub use split::{split_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};

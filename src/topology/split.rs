@@ -1,0 +1,235 @@
+//! Splitting convex elements by a plane.
+//!
+//! Every element that has nodes strictly on both sides of the plane is
+//! replaced by its two convex parts. One new node is made per crossed global
+//! edge and shared by every element on that edge; every crossed face is split
+//! into two faces shared like the original; both parts get a common cap face.
+//! A node closer to the plane than `snap` times its shortest incident edge is
+//! taken to lie on it (used instead of a new node), so no edge shorter than
+//! that fraction ever appears. The mesh stays conforming by construction and
+//! the total volume is unchanged (the cap is shared with opposite
+//! orientations).
+
+use std::collections::HashMap;
+
+use cleave_kernels::vec3::{cross, dot, lerp, norm, scale, sub};
+use thiserror::Error;
+
+use crate::mesh::{Face, FaceRef, PolyMesh};
+
+/// An oriented plane through `point` with normal `normal` (need not be unit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    /// A point on the plane (m).
+    pub point: [f64; 3],
+    /// The normal; the positive side is where it points.
+    pub normal: [f64; 3],
+}
+
+/// Tolerances of a split.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SplitOptions {
+    /// Relative snapping distance (fraction of a node's shortest incident
+    /// edge). Default `1e-4`.
+    pub snap: f64,
+}
+
+impl Default for SplitOptions {
+    fn default() -> Self {
+        SplitOptions { snap: 1e-4 }
+    }
+}
+
+/// A node created on an edge: position `x_a + t (x_b - x_a)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewNode {
+    /// The new node's id.
+    pub id: u32,
+    /// Edge end nodes.
+    pub a: u32,
+    /// Edge end nodes.
+    pub b: u32,
+    /// Position along the edge in `(0, 1)`.
+    pub t: f64,
+}
+
+/// What a split changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SplitReport {
+    /// Nodes created on crossed edges (state is interpolated from `a`, `b`).
+    pub new_nodes: Vec<NewNode>,
+    /// For each split element: `(kept id, new id)`; the kept id holds the
+    /// positive part, the new id (appended) the negative part.
+    pub split_elements: Vec<(u32, u32)>,
+}
+
+/// A split that cannot be carried out.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum SplitError {
+    /// The plane's normal is zero or not finite.
+    #[error("the split plane has an invalid normal {0:?}")]
+    InvalidPlane([f64; 3]),
+    /// An element the plane crosses is not convex enough to split.
+    #[error("element {element} is crossed by the plane but is not convex (face {face} lies in the plane)")]
+    NonConvexElement { element: usize, face: usize },
+    /// The cap polygon of an element has fewer than 3 corners.
+    #[error("element {element}: the plane crosses it in fewer than 3 points")]
+    DegenerateCap { element: usize },
+}
+
+/// Splits every element that `plane` crosses (see the module docs).
+pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<SplitReport, SplitError> {
+    let len = norm(plane.normal);
+    if !(len > 0.0) || !len.is_finite() || !plane.point.iter().all(|x| x.is_finite()) {
+        return Err(SplitError::InvalidPlane(plane.normal));
+    }
+    let n = scale(plane.normal, 1.0 / len);
+    // shortest incident edge per node
+    let mut h = vec![f64::INFINITY; mesh.nodes.len()];
+    for face in &mesh.faces {
+        let v = &face.vertices;
+        for i in 0..v.len() {
+            let (a, b) = (v[i] as usize, v[(i + 1) % v.len()] as usize);
+            let l = norm(sub(mesh.nodes[a], mesh.nodes[b]));
+            h[a] = h[a].min(l);
+            h[b] = h[b].min(l);
+        }
+    }
+    let dist: Vec<f64> = mesh.nodes.iter().map(|p| dot(sub(*p, plane.point), n)).collect();
+    let side: Vec<i8> = dist
+        .iter()
+        .zip(&h)
+        .map(|(&d, &h)| {
+            if d.abs() <= opts.snap * h {
+                0
+            } else if d > 0.0 {
+                1
+            } else {
+                -1
+            }
+        })
+        .collect();
+    let crossed: Vec<usize> = (0..mesh.elements.len())
+        .filter(|&e| {
+            let nodes = &mesh.elements[e].nodes;
+            nodes.iter().any(|&v| side[v as usize] > 0) && nodes.iter().any(|&v| side[v as usize] < 0)
+        })
+        .collect();
+    let mut report = SplitReport::default();
+    if crossed.is_empty() {
+        return Ok(report);
+    }
+    // 1. crossing nodes, one per crossed edge
+    let mut edge_node: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut crossing = |mesh: &mut PolyMesh, report: &mut SplitReport, a: u32, b: u32| -> u32 {
+        let key = (a.min(b), a.max(b));
+        *edge_node.entry(key).or_insert_with(|| {
+            let (lo, hi) = key;
+            let t = dist[lo as usize] / (dist[lo as usize] - dist[hi as usize]);
+            let id = mesh.nodes.len() as u32;
+            mesh.nodes.push(lerp(mesh.nodes[lo as usize], mesh.nodes[hi as usize], t));
+            report.new_nodes.push(NewNode { id, a: lo, b: hi, t });
+            id
+        })
+    };
+    // 2. split the crossed faces: face -> (positive part, negative part)
+    let mut face_parts: HashMap<u32, (u32, u32)> = HashMap::new();
+    for &e in &crossed {
+        for r in mesh.elements[e].faces.clone() {
+            if face_parts.contains_key(&r.face) {
+                continue;
+            }
+            let v = mesh.faces[r.face as usize].vertices.clone();
+            let has_pos = v.iter().any(|&x| side[x as usize] > 0);
+            let has_neg = v.iter().any(|&x| side[x as usize] < 0);
+            if !(has_pos && has_neg) {
+                continue;
+            }
+            let (mut pos, mut neg) = (Vec::new(), Vec::new());
+            for i in 0..v.len() {
+                let (a, b) = (v[i], v[(i + 1) % v.len()]);
+                let sa = side[a as usize];
+                if sa >= 0 {
+                    pos.push(a);
+                }
+                if sa <= 0 {
+                    neg.push(a);
+                }
+                if sa * side[b as usize] < 0 {
+                    let c = crossing(mesh, &mut report, a, b);
+                    pos.push(c);
+                    neg.push(c);
+                }
+            }
+            let f_pos = r.face;
+            mesh.faces[f_pos as usize] = Face { vertices: pos, triangles: Vec::new() };
+            let f_neg = mesh.faces.len() as u32;
+            mesh.faces.push(Face { vertices: neg, triangles: Vec::new() });
+            mesh.triangulate_face(f_pos as usize);
+            mesh.triangulate_face(f_neg as usize);
+            face_parts.insert(r.face, (f_pos, f_neg));
+        }
+    }
+    // 3. split the elements
+    let (u, w) = plane_basis(n);
+    for &e in &crossed {
+        let refs = mesh.elements[e].faces.clone();
+        let (mut pos_faces, mut neg_faces) = (Vec::new(), Vec::new());
+        let mut cap_points: Vec<u32> = Vec::new();
+        for r in &refs {
+            if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
+                pos_faces.push(FaceRef { face: fp, outward: r.outward });
+                neg_faces.push(FaceRef { face: fneg, outward: r.outward });
+                cap_points.extend(mesh.faces[fp as usize].vertices.iter().filter(|&&x| {
+                    (x as usize) >= side.len() || side[x as usize] == 0
+                }));
+                continue;
+            }
+            let v = &mesh.faces[r.face as usize].vertices;
+            cap_points.extend(v.iter().filter(|&&x| side[x as usize] == 0));
+            if v.iter().any(|&x| side[x as usize] > 0) {
+                pos_faces.push(*r);
+            } else if v.iter().any(|&x| side[x as usize] < 0) {
+                neg_faces.push(*r);
+            } else {
+                return Err(SplitError::NonConvexElement { element: e, face: r.face as usize });
+            }
+        }
+        cap_points.sort_unstable();
+        cap_points.dedup();
+        if cap_points.len() < 3 {
+            return Err(SplitError::DegenerateCap { element: e });
+        }
+        // order the cap counter-clockwise about +n
+        let c = scale(
+            cap_points.iter().fold([0.0; 3], |acc, &p| cleave_kernels::vec3::add(acc, mesh.nodes[p as usize])),
+            1.0 / cap_points.len() as f64,
+        );
+        let angle = |p: u32| {
+            let d = sub(mesh.nodes[p as usize], c);
+            dot(d, w).atan2(dot(d, u))
+        };
+        cap_points.sort_by(|&a, &b| angle(a).total_cmp(&angle(b)));
+        let cap = mesh.faces.len() as u32;
+        mesh.faces.push(Face { vertices: cap_points, triangles: Vec::new() });
+        mesh.triangulate_face(cap as usize);
+        // the cap's normal is +n: it points out of the negative part
+        pos_faces.push(FaceRef { face: cap, outward: false });
+        neg_faces.push(FaceRef { face: cap, outward: true });
+        mesh.elements[e].faces = pos_faces;
+        mesh.refresh_element_nodes(e);
+        let ne = mesh.elements.len();
+        mesh.elements.push(crate::mesh::Element { faces: neg_faces, nodes: Vec::new() });
+        mesh.refresh_element_nodes(ne);
+        report.split_elements.push((e as u32, ne as u32));
+    }
+    Ok(report)
+}
+
+/// Two unit vectors `(u, w)` with `(u, w, n)` right-handed.
+fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let u = cross(a, n);
+    let u = scale(u, 1.0 / norm(u));
+    (u, cross(n, u))
+}
