@@ -43,9 +43,15 @@ pub struct Report {
 impl Report {
     /// A plain-text table of the report.
     pub fn to_table(&self) -> String {
-        let mut s = format!("threads: {}\n{:<24} {:<22} {:>10} {:>12} {:>16}\n", self.threads, "stage", "mesh", "elements", "ms", "elements/s");
+        let mut s = format!(
+            "threads: {}\n{:<24} {:<22} {:>10} {:>12} {:>16}\n",
+            self.threads, "stage", "mesh", "elements", "ms", "elements/s"
+        );
         for m in &self.measurements {
-            s += &format!("{:<24} {:<22} {:>10} {:>12.3} {:>16.0}", m.name, m.mesh, m.elements, m.ms, m.elements_per_s);
+            s += &format!(
+                "{:<24} {:<22} {:>10} {:>12.3} {:>16.0}",
+                m.name, m.mesh, m.elements, m.ms, m.elements_per_s
+            );
             if let Some((k, v)) = &m.extra {
                 s += &format!("  {k} = {v:.0}");
             }
@@ -95,13 +101,19 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let mut values = vec![0.0; pattern.nnz()];
     let (ms, ()) = best_ms(5, || {
         values.fill(0.0);
-        pattern.assemble(&store, &mut values, |b, i, o| o.copy_from_slice(store.batches[b].element_stiffness(i)))
+        pattern.assemble(&store, &mut values, |b, i, o| {
+            o.copy_from_slice(store.batches[b].element_stiffness(i))
+        })
     });
     push("assembly", ms, None);
     let mut chol = Cholesky::default();
     let (ms, r) = best_ms(1, || chol.analyze(pattern.symbolic.as_ref()));
     r?;
-    push("cholesky symbolic", ms, Some(("nnz(L)".into(), chol.factor_nnz() as f64)));
+    push(
+        "cholesky symbolic",
+        ms,
+        Some(("nnz(L)".into(), chol.factor_nnz() as f64)),
+    );
     // a regular matrix: K plus a mass-like diagonal
     for d in 0..3 * nn {
         values[pattern.diagonal_slot(d)] += 1e3;
@@ -114,5 +126,8 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let (ms, r) = best_ms(3, || chol.solve(&b, &mut x));
     r?;
     push("cholesky solve", ms, None);
-    Ok(Report { threads: rayon::current_num_threads(), measurements: out })
+    Ok(Report {
+        threads: rayon::current_num_threads(),
+        measurements: out,
+    })
 }

@@ -107,10 +107,21 @@ impl SparsePattern {
                 position(j as u32, j as u32) + c * col_stride[j] + c
             })
             .collect();
-        let colours = store.batches.iter().map(|b| colour(b.k, &b.nodes, num_blocks)).collect();
+        let colours = store
+            .batches
+            .iter()
+            .map(|b| colour(b.k, &b.nodes, num_blocks))
+            .collect();
         // SAFETY-free check of the structure happens inside faer.
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        SparsePattern { num_blocks, symbolic, col_stride, slots, colours, diagonal }
+        SparsePattern {
+            num_blocks,
+            symbolic,
+            col_stride,
+            slots,
+            colours,
+            diagonal,
+        }
     }
 
     /// Number of stored scalar entries.

@@ -55,14 +55,22 @@ fn set_threads(threads: Option<usize>) -> Result<(), String> {
         if n == 0 {
             return Err("--threads must be at least 1".into());
         }
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| e.to_string())?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| e.to_string())?;
     }
     Ok(())
 }
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
-        Command::Run { scene, out, steps, threads } => {
+        Command::Run {
+            scene,
+            out,
+            steps,
+            threads,
+        } => {
             set_threads(threads)?;
             let loaded = LoadedScene::load(&scene).map_err(|e| e.to_string())?;
             let opts = RunOptions { out, steps };
@@ -91,7 +99,10 @@ fn run(cli: Cli) -> Result<(), String> {
                 println!("    {k:>3} vertices: {n}");
             }
             println!("  volume    {:.9e}", m.total_volume());
-            println!("  bbox      [{:.6e}, {:.6e}, {:.6e}] .. [{:.6e}, {:.6e}, {:.6e}]", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+            println!(
+                "  bbox      [{:.6e}, {:.6e}, {:.6e}] .. [{:.6e}, {:.6e}, {:.6e}]",
+                lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+            );
             let adj = m.adjacency();
             let (_, components) = adj.element_components(&m);
             let unused = (0..m.nodes.len()).filter(|&i| adj.node_elements(i).is_empty()).count();

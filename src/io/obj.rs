@@ -17,9 +17,16 @@ pub struct Surface {
 
 /// Reads an OBJ surface (polygons are triangulated; groups are merged).
 pub fn read_obj_surface(path: &Path) -> Result<Surface, IoError> {
-    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ..Default::default()
+    };
     let (models, _) = tobj::load_obj(path, &opts).map_err(|e| match e {
-        tobj::LoadError::OpenFileFailed => IoError::os(path, std::io::Error::new(std::io::ErrorKind::NotFound, "cannot open file")),
+        tobj::LoadError::OpenFileFailed => IoError::os(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "cannot open file"),
+        ),
         other => IoError::parse(path, 0, format!("not a valid OBJ file: {other}")),
     })?;
     let mut s = Surface::default();
@@ -28,7 +35,10 @@ pub fn read_obj_surface(path: &Path) -> Result<Surface, IoError> {
         for p in m.mesh.positions.chunks_exact(3) {
             let v = [p[0], p[1], p[2]];
             if !v.iter().all(|x| x.is_finite()) {
-                return Err(IoError::unsupported(path, format!("vertex {} has a non-finite coordinate", s.vertices.len() + 1)));
+                return Err(IoError::unsupported(
+                    path,
+                    format!("vertex {} has a non-finite coordinate", s.vertices.len() + 1),
+                ));
             }
             s.vertices.push(v);
         }
@@ -55,7 +65,11 @@ pub fn write_boundary_obj(path: &Path, mesh: &PolyMesh, positions: &[[f64; 3]]) 
             continue;
         }
         let e = adj.face_elements[f][0] as usize;
-        let outward = mesh.elements[e].faces.iter().find(|r| r.face as usize == f).is_some_and(|r| r.outward);
+        let outward = mesh.elements[e]
+            .faces
+            .iter()
+            .find(|r| r.face as usize == f)
+            .is_some_and(|r| r.outward);
         for t in &face.triangles {
             let t = if outward { *t } else { [t[0], t[2], t[1]] };
             let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);

@@ -44,21 +44,32 @@ impl<'a> Tokens<'a> {
                 self.pos += 1;
                 Ok(t.1)
             }
-            None => Err(IoError::parse(self.path, self.line(), format!("unexpected end of file, expected {what}"))),
+            None => Err(IoError::parse(
+                self.path,
+                self.line(),
+                format!("unexpected end of file, expected {what}"),
+            )),
         }
     }
 
     pub fn usize(&mut self, what: &str) -> Result<usize, IoError> {
         let line = self.line();
         let t = self.next(what)?;
-        t.parse().map_err(|_| IoError::parse(self.path, line, format!("expected {what} (a non-negative integer), found '{t}'")))
+        t.parse().map_err(|_| {
+            IoError::parse(
+                self.path,
+                line,
+                format!("expected {what} (a non-negative integer), found '{t}'"),
+            )
+        })
     }
 
     pub fn f64(&mut self, what: &str) -> Result<f64, IoError> {
         let line = self.line();
         let t = self.next(what)?;
-        let v: f64 =
-            t.parse().map_err(|_| IoError::parse(self.path, line, format!("expected {what} (a number), found '{t}'")))?;
+        let v: f64 = t
+            .parse()
+            .map_err(|_| IoError::parse(self.path, line, format!("expected {what} (a number), found '{t}'")))?;
         if !v.is_finite() {
             return Err(IoError::parse(self.path, line, format!("{what} is not finite: '{t}'")));
         }

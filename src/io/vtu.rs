@@ -1,8 +1,10 @@
 //! VTK XML unstructured grids (`.vtu`).
 //!
-//! Writing: tetrahedra as `VTK_TETRA` (10), every other element as
-//! `VTK_POLYHEDRON` (42) with the `faces`/`faceoffsets` arrays, so any element
-//! cleave makes opens in ParaView. Arrays are base64 `binary` with a UInt64
+//! Writing: a mesh of tetrahedra only as `VTK_TETRA` (10) cells; any other
+//! mesh with every element as `VTK_POLYHEDRON` (42) with the
+//! `faces`/`faceoffsets` arrays, so any element cleave makes opens in
+//! ParaView (readers such as meshio do not accept polyhedra mixed with other
+//! cell types, hence all or nothing). Arrays are base64 `binary` with a UInt64
 //! header. Reading: `VTK_TETRA`, `VTK_HEXAHEDRON` (12) and `VTK_POLYHEDRON`
 //! cells from `ascii` or uncompressed `binary` arrays.
 
@@ -39,9 +41,16 @@ fn b64<T: bytemuck::Pod>(data: &[T]) -> String {
 }
 
 fn data_array(s: &mut String, ty: &str, name: &str, comps: usize, payload: String) {
+    // scalar arrays carry no NumberOfComponents, as VTK writes them (meshio
+    // would otherwise read them as n x 1 tables)
+    let comps = if comps == 1 {
+        String::new()
+    } else {
+        format!(" NumberOfComponents=\"{comps}\"")
+    };
     let _ = writeln!(
         s,
-        "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{comps}\" format=\"binary\">{payload}</DataArray>"
+        "        <DataArray type=\"{ty}\" Name=\"{name}\"{comps} format=\"binary\">{payload}</DataArray>"
     );
 }
 
@@ -53,18 +62,19 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
     let mut types: Vec<u8> = Vec::with_capacity(mesh.elements.len());
     let mut faces: Vec<i64> = Vec::new();
     let mut faceoffsets: Vec<i64> = Vec::with_capacity(mesh.elements.len());
-    let mut any_poly = false;
+    let all_tets = mesh
+        .elements
+        .iter()
+        .all(|el| el.nodes.len() == 4 && el.faces.len() == 4);
     for el in &mesh.elements {
-        if el.nodes.len() == 4 && el.faces.len() == 4 {
+        if all_tets {
             let v = &el.nodes;
             let rest = |i: usize| mesh.nodes[v[i] as usize];
             let positive = cleave_kernels::tet::signed_volume(rest(0), rest(1), rest(2), rest(3)) > 0.0;
             let order = if positive { [0, 1, 2, 3] } else { [0, 2, 1, 3] };
             conn.extend(order.iter().map(|&i| v[i] as i64));
             types.push(VTK_TETRA);
-            faceoffsets.push(-1);
         } else {
-            any_poly = true;
             conn.extend(el.nodes.iter().map(|&x| x as i64));
             types.push(VTK_POLYHEDRON);
             faces.push(el.faces.len() as i64);
@@ -84,9 +94,16 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
     let flat: Vec<f64> = points.iter().flatten().copied().collect();
     let mut s = String::new();
     s.push_str("<?xml version=\"1.0\"?>\n");
-    s.push_str("<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n");
+    s.push_str(
+        "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n",
+    );
     s.push_str("  <UnstructuredGrid>\n");
-    let _ = writeln!(s, "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">", points.len(), mesh.elements.len());
+    let _ = writeln!(
+        s,
+        "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
+        points.len(),
+        mesh.elements.len()
+    );
     s.push_str("      <PointData>\n");
     for (name, v) in &fields.point_vectors {
         let flat: Vec<f64> = v.iter().flatten().copied().collect();
@@ -105,7 +122,7 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
     data_array(&mut s, "Int64", "connectivity", 1, b64(&conn));
     data_array(&mut s, "Int64", "offsets", 1, b64(&offsets));
     data_array(&mut s, "UInt8", "types", 1, b64(&types));
-    if any_poly {
+    if !all_tets {
         data_array(&mut s, "Int64", "faces", 1, b64(&faces));
         data_array(&mut s, "Int64", "faceoffsets", 1, b64(&faceoffsets));
     }
@@ -123,7 +140,13 @@ struct Array {
 /// Reads the cells of a `.vtu` file as a mesh.
 pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let text = read_text(path)?;
-    let line_at = |pos: u64| text.as_bytes()[..(pos as usize).min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1;
+    let line_at = |pos: u64| {
+        text.as_bytes()[..(pos as usize).min(text.len())]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1
+    };
     let mut reader = quick_xml::Reader::from_str(&text);
     let mut header64 = false;
     let mut section = String::new();
@@ -133,7 +156,9 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let mut cell_arrays: Vec<Array> = Vec::new();
     loop {
         let pos = reader.buffer_position();
-        let ev = reader.read_event().map_err(|e| IoError::parse(path, line_at(pos), format!("malformed XML: {e}")))?;
+        let ev = reader
+            .read_event()
+            .map_err(|e| IoError::parse(path, line_at(pos), format!("malformed XML: {e}")))?;
         match ev {
             Event::Start(e) | Event::Empty(e) => {
                 let tag = String::from_utf8_lossy(e.name().as_ref()).into_owned();
@@ -149,7 +174,10 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                             return Err(IoError::unsupported(path, "not a VTK UnstructuredGrid file"));
                         }
                         if attr("compressor").is_some() {
-                            return Err(IoError::unsupported(path, "compressed VTU is not supported; save uncompressed"));
+                            return Err(IoError::unsupported(
+                                path,
+                                "compressed VTU is not supported; save uncompressed",
+                            ));
                         }
                         if attr("byte_order").as_deref() == Some("BigEndian") {
                             return Err(IoError::unsupported(path, "big-endian VTU is not supported"));
@@ -158,7 +186,10 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                     }
                     "Points" | "Cells" | "PointData" | "CellData" => section = tag,
                     "AppendedData" => {
-                        return Err(IoError::unsupported(path, "appended VTU data is not supported; save ascii or binary"))
+                        return Err(IoError::unsupported(
+                            path,
+                            "appended VTU data is not supported; save ascii or binary",
+                        ))
                     }
                     "DataArray" => {
                         current = Some((
@@ -173,7 +204,10 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                 }
             }
             Event::Text(t) if current.is_some() => {
-                body.push_str(&t.decode().map_err(|e| IoError::parse(path, line_at(pos), e.to_string()))?);
+                body.push_str(
+                    &t.decode()
+                        .map_err(|e| IoError::parse(path, line_at(pos), e.to_string()))?,
+                );
             }
             Event::End(e) if e.name().as_ref() == b"DataArray" => {
                 if let Some((name, ty, format, line)) = current.take() {
@@ -192,7 +226,11 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     }
     let points = points.ok_or_else(|| IoError::unsupported(path, "no <Points> array"))?;
     if points.values.len() % 3 != 0 {
-        return Err(IoError::parse(path, points.line, "the Points array length is not a multiple of 3"));
+        return Err(IoError::parse(
+            path,
+            points.line,
+            "the Points array length is not a multiple of 3",
+        ));
     }
     let nodes: Vec<[f64; 3]> = points.values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let get = |n: &str| cell_arrays.iter().find(|a| a.name == n);
@@ -201,7 +239,11 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let types = get("types").ok_or_else(|| IoError::unsupported(path, "no Cells/types array"))?;
     let as_index = |arr: &Array, v: f64| -> Result<usize, IoError> {
         if v < 0.0 || v.fract() != 0.0 {
-            return Err(IoError::parse(path, arr.line, format!("'{}' holds {v}, not an index", arr.name)));
+            return Err(IoError::parse(
+                path,
+                arr.line,
+                format!("'{}' holds {v}, not an index", arr.name),
+            ));
         }
         Ok(v as usize)
     };
@@ -210,16 +252,30 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let faces = get("faces");
     let faceoffs = get("faceoffsets");
     for (c, &ty) in types.values.iter().enumerate() {
-        let end = as_index(offs, *offs.values.get(c).ok_or_else(|| IoError::parse(path, offs.line, "fewer offsets than cells"))?)?;
+        let end = as_index(
+            offs,
+            *offs
+                .values
+                .get(c)
+                .ok_or_else(|| IoError::parse(path, offs.line, "fewer offsets than cells"))?,
+        )?;
         if end < start || end > conn.values.len() {
-            return Err(IoError::parse(path, offs.line, format!("offset of cell {c} is out of range")));
+            return Err(IoError::parse(
+                path,
+                offs.line,
+                format!("offset of cell {c} is out of range"),
+            ));
         }
         let ids: Vec<u32> = conn.values[start..end]
             .iter()
             .map(|&v| {
                 let i = as_index(conn, v)?;
                 if i >= nodes.len() {
-                    return Err(IoError::parse(path, conn.line, format!("cell {c} refers to point {i}, but there are {}", nodes.len())));
+                    return Err(IoError::parse(
+                        path,
+                        conn.line,
+                        format!("cell {c} refers to point {i}, but there are {}", nodes.len()),
+                    ));
                 }
                 Ok(i as u32)
             })
@@ -230,12 +286,23 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
             VTK_HEXAHEDRON if ids.len() == 8 => cells.push(Cell::Hex(std::array::from_fn(|i| ids[i]))),
             VTK_POLYHEDRON => {
                 let (Some(faces), Some(fo)) = (faces, faceoffs) else {
-                    return Err(IoError::unsupported(path, "polyhedron cells need 'faces' and 'faceoffsets' arrays"));
+                    return Err(IoError::unsupported(
+                        path,
+                        "polyhedron cells need 'faces' and 'faceoffsets' arrays",
+                    ));
                 };
                 let end = as_index(fo, fo.values[c])?;
-                let prev = (0..c).rev().map(|k| fo.values[k]).find(|&v| v >= 0.0).map_or(Ok(0), |v| as_index(fo, v))?;
+                let prev = (0..c)
+                    .rev()
+                    .map(|k| fo.values[k])
+                    .find(|&v| v >= 0.0)
+                    .map_or(Ok(0), |v| as_index(fo, v))?;
                 if end > faces.values.len() || prev > end {
-                    return Err(IoError::parse(path, fo.line, format!("faceoffsets of cell {c} out of range")));
+                    return Err(IoError::parse(
+                        path,
+                        fo.line,
+                        format!("faceoffsets of cell {c} out of range"),
+                    ));
                 }
                 let stream = &faces.values[prev..end];
                 let mut loops = Vec::new();
@@ -244,11 +311,22 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                 for _ in 0..nf {
                     let n = stream.get(k).map_or(Ok(0), |&v| as_index(faces, v))?;
                     let Some(lp) = stream.get(k + 1..k + 1 + n) else {
-                        return Err(IoError::parse(path, faces.line, format!("face stream of cell {c} is truncated")));
+                        return Err(IoError::parse(
+                            path,
+                            faces.line,
+                            format!("face stream of cell {c} is truncated"),
+                        ));
                     };
-                    let lp: Vec<u32> = lp.iter().map(|&v| as_index(faces, v).map(|i| i as u32)).collect::<Result<_, _>>()?;
+                    let lp: Vec<u32> = lp
+                        .iter()
+                        .map(|&v| as_index(faces, v).map(|i| i as u32))
+                        .collect::<Result<_, _>>()?;
                     if let Some(&bad) = lp.iter().find(|&&i| i as usize >= nodes.len()) {
-                        return Err(IoError::parse(path, faces.line, format!("cell {c} refers to point {bad}, out of range")));
+                        return Err(IoError::parse(
+                            path,
+                            faces.line,
+                            format!("cell {c} refers to point {bad}, out of range"),
+                        ));
                     }
                     loops.push(lp);
                     k += 1 + n;
@@ -258,7 +336,10 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
             other => {
                 return Err(IoError::unsupported(
                     path,
-                    format!("cell {c} has VTK type {other} with {} points (tetra 10, hexahedron 12, polyhedron 42 are read)", ids.len()),
+                    format!(
+                    "cell {c} has VTK type {other} with {} points (tetra 10, hexahedron 12, polyhedron 42 are read)",
+                    ids.len()
+                ),
                 ))
             }
         }
@@ -266,7 +347,14 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))
 }
 
-fn decode_array(path: &Path, line: usize, ty: &str, format: &str, body: &str, header64: bool) -> Result<Vec<f64>, IoError> {
+fn decode_array(
+    path: &Path,
+    line: usize,
+    ty: &str,
+    format: &str,
+    body: &str,
+    header64: bool,
+) -> Result<Vec<f64>, IoError> {
     match format {
         "ascii" => body
             .split_whitespace()
@@ -290,13 +378,20 @@ fn decode_array(path: &Path, line: usize, ty: &str, format: &str, body: &str, he
             } else {
                 u32::from_le_bytes(raw[..4].try_into().unwrap()) as usize
             };
-            let data = raw.get(hlen..hlen + n).ok_or_else(|| IoError::parse(path, line, "binary array is truncated"))?;
+            let data = raw
+                .get(hlen..hlen + n)
+                .ok_or_else(|| IoError::parse(path, line, "binary array is truncated"))?;
             let size = match ty {
                 "Float64" | "Int64" | "UInt64" => 8,
                 "Float32" | "Int32" | "UInt32" => 4,
                 "Int16" | "UInt16" => 2,
                 "Int8" | "UInt8" => 1,
-                _ => return Err(IoError::unsupported(path, format!("line {line}: DataArray type '{ty}' is not supported"))),
+                _ => {
+                    return Err(IoError::unsupported(
+                        path,
+                        format!("line {line}: DataArray type '{ty}' is not supported"),
+                    ))
+                }
             };
             let vals: Vec<f64> = data
                 .chunks_exact(size)
@@ -314,10 +409,17 @@ fn decode_array(path: &Path, line: usize, ty: &str, format: &str, body: &str, he
                 })
                 .collect();
             if let Some(bad) = vals.iter().position(|v| !v.is_finite()) {
-                return Err(IoError::parse(path, line, format!("value {bad} of the array is not finite")));
+                return Err(IoError::parse(
+                    path,
+                    line,
+                    format!("value {bad} of the array is not finite"),
+                ));
             }
             Ok(vals)
         }
-        other => Err(IoError::unsupported(path, format!("line {line}: DataArray format '{other}' is not supported"))),
+        other => Err(IoError::unsupported(
+            path,
+            format!("line {line}: DataArray format '{other}' is not supported"),
+        )),
     }
 }

@@ -72,10 +72,17 @@ impl Cell {
                 vec![t[1], t[2], t[3]],
                 vec![t[0], t[3], t[2]],
             ],
-            Cell::Hex(h) => [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
-                .iter()
-                .map(|f| f.iter().map(|&i| h[i]).collect())
-                .collect(),
+            Cell::Hex(h) => [
+                [0, 3, 2, 1],
+                [4, 5, 6, 7],
+                [0, 1, 5, 4],
+                [1, 2, 6, 5],
+                [2, 3, 7, 6],
+                [3, 0, 4, 7],
+            ]
+            .iter()
+            .map(|f| f.iter().map(|&i| h[i]).collect())
+            .collect(),
             Cell::Polyhedron(faces) => faces.clone(),
         }
     }
@@ -108,7 +115,17 @@ impl PolyMesh {
     /// here; geometric ones by [`PolyMesh::validate`].
     pub fn from_cells(nodes: Vec<[f64; 3]>, cells: &[Cell]) -> Result<Self, MeshError> {
         let n = nodes.len();
-        let mut mesh = PolyMesh { nodes, faces: Vec::new(), elements: Vec::with_capacity(cells.len()) };
+        if let Some(node) = nodes.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
+            return Err(MeshError::NonFiniteNode {
+                node,
+                position: nodes[node],
+            });
+        }
+        let mut mesh = PolyMesh {
+            nodes,
+            faces: Vec::new(),
+            elements: Vec::with_capacity(cells.len()),
+        };
         let mut by_key: HashMap<Vec<u32>, u32> = HashMap::new();
         let mut users: Vec<u8> = Vec::new();
         for (e, cell) in cells.iter().enumerate() {
@@ -116,7 +133,11 @@ impl PolyMesh {
             let mut refs = Vec::with_capacity(loops.len());
             for lp in loops {
                 if let Some(&bad) = lp.iter().find(|&&v| v as usize >= n) {
-                    return Err(MeshError::NodeIndexOutOfRange { element: e, index: bad as usize, nodes: n });
+                    return Err(MeshError::NodeIndexOutOfRange {
+                        element: e,
+                        index: bad as usize,
+                        nodes: n,
+                    });
                 }
                 let key = face_key(&lp);
                 let distinct = {
@@ -125,23 +146,35 @@ impl PolyMesh {
                     d.len()
                 };
                 if distinct < 3 || distinct != lp.len() {
-                    return Err(MeshError::DegenerateFace { element: e, vertices: lp });
+                    return Err(MeshError::DegenerateFace {
+                        element: e,
+                        vertices: lp,
+                    });
                 }
                 let next = mesh.faces.len() as u32;
                 let f = *by_key.entry(key).or_insert(next);
                 if f == next {
-                    mesh.faces.push(Face { vertices: lp.clone(), triangles: Vec::new() });
+                    mesh.faces.push(Face {
+                        vertices: lp.clone(),
+                        triangles: Vec::new(),
+                    });
                     users.push(0);
                 }
                 users[f as usize] += 1;
                 if users[f as usize] > 2 {
-                    return Err(MeshError::FaceSharedByMoreThanTwo { face: f as usize, element: e });
+                    return Err(MeshError::FaceSharedByMoreThanTwo {
+                        face: f as usize,
+                        element: e,
+                    });
                 }
                 // Same cyclic direction as the stored loop?
                 let same = same_direction(&mesh.faces[f as usize].vertices, &lp);
                 refs.push(FaceRef { face: f, outward: same });
             }
-            mesh.elements.push(Element { faces: refs, nodes: Vec::new() });
+            mesh.elements.push(Element {
+                faces: refs,
+                nodes: Vec::new(),
+            });
         }
         for e in 0..mesh.elements.len() {
             mesh.refresh_element_nodes(e);
@@ -163,8 +196,11 @@ impl PolyMesh {
 
     /// Recomputes the sorted node list of element `e` from its faces.
     pub(crate) fn refresh_element_nodes(&mut self, e: usize) {
-        let mut nodes: Vec<u32> =
-            self.elements[e].faces.iter().flat_map(|r| self.faces[r.face as usize].vertices.iter().copied()).collect();
+        let mut nodes: Vec<u32> = self.elements[e]
+            .faces
+            .iter()
+            .flat_map(|r| self.faces[r.face as usize].vertices.iter().copied())
+            .collect();
         nodes.sort_unstable();
         nodes.dedup();
         self.elements[e].nodes = nodes;
@@ -187,7 +223,10 @@ impl PolyMesh {
     pub fn element_triangles(&self, e: usize) -> impl Iterator<Item = [u32; 3]> + '_ {
         self.elements[e].faces.iter().flat_map(move |r| {
             let out = r.outward;
-            self.faces[r.face as usize].triangles.iter().map(move |t| if out { *t } else { [t[0], t[2], t[1]] })
+            self.faces[r.face as usize]
+                .triangles
+                .iter()
+                .map(move |t| if out { *t } else { [t[0], t[2], t[1]] })
         })
     }
 
@@ -213,7 +252,11 @@ impl PolyMesh {
         let mut v = 0.0;
         let mut c = [0.0; 3];
         for t in self.element_triangles(e) {
-            let (a, b, d) = (self.nodes[t[0] as usize], self.nodes[t[1] as usize], self.nodes[t[2] as usize]);
+            let (a, b, d) = (
+                self.nodes[t[0] as usize],
+                self.nodes[t[1] as usize],
+                self.nodes[t[2] as usize],
+            );
             let vt = cleave_kernels::tet::signed_volume(origin, a, b, d);
             v += vt;
             c = add(c, scale(add(add(origin, a), add(b, d)), vt / 4.0));
@@ -244,7 +287,9 @@ impl PolyMesh {
         el.faces.iter().all(|r| {
             let g = face_geometry(&self.nodes, &self.faces[r.face as usize].vertices);
             let n = if r.outward { g.normal } else { scale(g.normal, -1.0) };
-            el.nodes.iter().all(|&v| cleave_kernels::vec3::dot(sub(self.nodes[v as usize], g.centroid), n) <= rel_tol * diam)
+            el.nodes
+                .iter()
+                .all(|&v| cleave_kernels::vec3::dot(sub(self.nodes[v as usize], g.centroid), n) <= rel_tol * diam)
         })
     }
 
@@ -274,6 +319,22 @@ impl PolyMesh {
         (lo, hi)
     }
 
+    /// Total area of the faces that bound exactly one element (m^2).
+    pub fn boundary_area(&self) -> f64 {
+        let mut users = vec![0u8; self.faces.len()];
+        for el in &self.elements {
+            for r in &el.faces {
+                users[r.face as usize] = users[r.face as usize].saturating_add(1);
+            }
+        }
+        self.faces
+            .iter()
+            .zip(&users)
+            .filter(|(_, &u)| u == 1)
+            .map(|(f, _)| face_geometry(&self.nodes, &f.vertices).area)
+            .sum()
+    }
+
     /// Element counts keyed by vertex count, in increasing vertex count.
     pub fn count_by_vertex_count(&self) -> std::collections::BTreeMap<usize, usize> {
         let mut m = std::collections::BTreeMap::new();
@@ -292,7 +353,9 @@ impl PolyMesh {
 /// Whether two loops over the same vertex set run in the same cyclic direction.
 fn same_direction(a: &[u32], b: &[u32]) -> bool {
     let n = a.len();
-    let Some(start) = b.iter().position(|&v| v == a[0]) else { return true };
+    let Some(start) = b.iter().position(|&v| v == a[0]) else {
+        return true;
+    };
     b[(start + 1) % n] == a[1]
 }
 
@@ -325,10 +388,20 @@ mod tests {
 
     #[test]
     fn two_tets_share_one_face() {
-        let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]];
+        let nodes = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+        ];
         let m = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([1, 2, 3, 4])]).unwrap();
         assert_eq!(m.faces.len(), 7);
-        let shared: Vec<_> = m.elements[0].faces.iter().filter(|r| m.elements[1].faces.iter().any(|s| s.face == r.face)).collect();
+        let shared: Vec<_> = m.elements[0]
+            .faces
+            .iter()
+            .filter(|r| m.elements[1].faces.iter().any(|s| s.face == r.face))
+            .collect();
         assert_eq!(shared.len(), 1);
         let other = m.elements[1].faces.iter().find(|s| s.face == shared[0].face).unwrap();
         assert_ne!(shared[0].outward, other.outward);

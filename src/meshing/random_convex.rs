@@ -19,7 +19,7 @@ fn uniform(rng: &mut ChaCha8Rng) -> f64 {
 pub fn random_convex(min: [f64; 3], max: [f64; 3], planes: usize, seed: u64) -> Result<PolyMesh, crate::Error> {
     let mut mesh = box_hex(min, max, [1, 1, 1])?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let opts = SplitOptions { snap: 1e-3 };
+    let opts = SplitOptions::default();
     for _ in 0..planes {
         let point = [0, 1, 2].map(|d| min[d] + uniform(&mut rng) * (max[d] - min[d]));
         // uniform direction: normalised Gaussian-free sampling on the sphere

@@ -30,7 +30,10 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
             }
             Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), &positions)?,
             Format::Png => {
-                return Err(IoError::Unsupported { path: dir.to_path_buf(), message: "png output is not implemented".into() })
+                return Err(IoError::Unsupported {
+                    path: dir.to_path_buf(),
+                    message: "png output is not implemented".into(),
+                })
             }
         }
     }
@@ -58,7 +61,10 @@ impl MeanMax {
         if n == 0 {
             return MeanMax::default();
         }
-        MeanMax { mean: sum / n as f64, max }
+        MeanMax {
+            mean: sum / n as f64,
+            max,
+        }
     }
 }
 

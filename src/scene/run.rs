@@ -35,7 +35,9 @@ impl LoadedScene {
             (Some(Generator::Box), Some(BoxElement::RandomConvex)) => {
                 random_convex(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(1))
             }
-            _ => Err(self.invalid("mesh", "…", "needs mesh.file or a generator with an element kind").into()),
+            _ => Err(self
+                .invalid("mesh", "…", "needs mesh.file or a generator with an element kind")
+                .into()),
         }
     }
 
@@ -55,7 +57,10 @@ impl LoadedScene {
     pub fn build_simulation(&self) -> Result<Simulation, Error> {
         let mesh = self.build_mesh()?;
         let s = &self.scene;
-        let params = SimulationParams { material: s.material(), gravity: s.simulation.gravity };
+        let params = SimulationParams {
+            material: s.material(),
+            gravity: s.simulation.gravity,
+        };
         let mut sim = Simulation::new(mesh, params)?;
         for f in &s.fixed {
             sim.fix(FixedRegion {
@@ -84,7 +89,11 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
             stats.push(sim.solve_static()?);
             1
         }
-        Mode::Dynamic => return Err(scene.unsupported("simulation.mode", "dynamic simulation is not implemented yet").into()),
+        Mode::Dynamic => {
+            return Err(scene
+                .unsupported("simulation.mode", "dynamic simulation is not implemented yet")
+                .into())
+        }
     };
     let t = Instant::now();
     write_frame(&dir, 0, &sim, &s.output.formats)?;
@@ -92,7 +101,11 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
     sim.record_output_time(t.elapsed().as_secs_f64());
     let adjacency = sim.mesh().adjacency();
     let (_, components) = adjacency.element_components(sim.mesh());
-    let max_displacement = sim.displacements().iter().map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()).fold(0.0, f64::max);
+    let max_displacement = sim
+        .displacements()
+        .iter()
+        .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+        .fold(0.0, f64::max);
     let wall = *sim.timings();
     let total = started.elapsed().as_secs_f64();
     let summary = Summary {

@@ -39,7 +39,11 @@ pub struct SimulationParams {
 impl Default for SimulationParams {
     fn default() -> Self {
         SimulationParams {
-            material: Material { young: 1e5, poisson: 0.3, density: 1000.0 },
+            material: Material {
+                young: 1e5,
+                poisson: 0.3,
+                density: 1000.0,
+            },
             gravity: [0.0, 0.0, -9.81],
         }
     }
@@ -61,7 +65,12 @@ pub struct FixedRegion {
 impl FixedRegion {
     /// Nodes in the box held at rest.
     pub fn clamp(min: [f64; 3], max: [f64; 3]) -> Self {
-        FixedRegion { min, max, displacement: [0.0; 3], gradient: [[0.0; 3]; 3] }
+        FixedRegion {
+            min,
+            max,
+            displacement: [0.0; 3],
+            gradient: [[0.0; 3]; 3],
+        }
     }
 
     /// Whether rest position `x` lies in the box (boundary included).
@@ -83,6 +92,7 @@ pub struct Simulation {
     pattern: SparsePattern,
     masses: Vec<f64>,
     fixed: Vec<FixedRegion>,
+    pinned: std::collections::BTreeMap<u32, [f64; 3]>,
     displacement: Vec<[f64; 3]>,
     velocity: Vec<[f64; 3]>,
     solver: Box<dyn LinearSolver>,
@@ -109,6 +119,7 @@ impl Simulation {
             pattern,
             masses,
             fixed: Vec::new(),
+            pinned: Default::default(),
             displacement: vec![[0.0; 3]; n],
             velocity: vec![[0.0; 3]; n],
             solver: Box::new(Cholesky::default()),
@@ -118,13 +129,43 @@ impl Simulation {
 
     /// Adds a Dirichlet region (checked for finite values).
     pub fn fix(&mut self, region: FixedRegion) -> Result<(), Error> {
-        let finite = region.min.iter().chain(&region.max).chain(&region.displacement).all(|v| v.is_finite())
+        let finite = region
+            .min
+            .iter()
+            .chain(&region.max)
+            .chain(&region.displacement)
+            .all(|v| v.is_finite())
             && region.gradient.iter().flatten().all(|v| v.is_finite());
         if !finite {
-            return Err(Error::Parameter(format!("fixed region {region:?} has a non-finite value")));
+            return Err(Error::Parameter(format!(
+                "fixed region {region:?} has a non-finite value"
+            )));
         }
         self.fixed.push(region);
         Ok(())
+    }
+
+    /// Holds node `node` at displacement `u` (m), overriding fixed regions;
+    /// pinning again moves it.
+    pub fn pin(&mut self, node: usize, u: [f64; 3]) -> Result<(), Error> {
+        if node >= self.mesh.nodes.len() {
+            return Err(Error::Parameter(format!(
+                "cannot pin node {node}: the mesh has {} nodes",
+                self.mesh.nodes.len()
+            )));
+        }
+        if !u.iter().all(|v| v.is_finite()) {
+            return Err(Error::Parameter(format!(
+                "cannot pin node {node} at non-finite displacement {u:?}"
+            )));
+        }
+        self.pinned.insert(node as u32, u);
+        Ok(())
+    }
+
+    /// Releases a pinned node (no effect if it was not pinned).
+    pub fn unpin(&mut self, node: usize) {
+        self.pinned.remove(&(node as u32));
     }
 
     /// The mesh (rest configuration).
@@ -154,7 +195,12 @@ impl Simulation {
 
     /// Current node positions `x0 + u` (m).
     pub fn positions(&self) -> Vec<[f64; 3]> {
-        self.mesh.nodes.iter().zip(&self.displacement).map(|(x, u)| [x[0] + u[0], x[1] + u[1], x[2] + u[2]]).collect()
+        self.mesh
+            .nodes
+            .iter()
+            .zip(&self.displacement)
+            .map(|(x, u)| [x[0] + u[0], x[1] + u[1], x[2] + u[2]])
+            .collect()
     }
 
     /// Lumped nodal masses (kg).
@@ -175,7 +221,11 @@ impl Simulation {
     /// Von Mises stress of every element at its stress point (Pa).
     pub fn von_mises(&self) -> Vec<f64> {
         let (l, m) = self.params.material.lame();
-        self.store.displacement_gradients(&self.displacement).into_iter().map(|g| von_mises(stress(g, l, m))).collect()
+        self.store
+            .displacement_gradients(&self.displacement)
+            .into_iter()
+            .map(|g| von_mises(stress(g, l, m)))
+            .collect()
     }
 
     /// Elastic energy `½ uᵀ K u` (J) of the current displacement.
@@ -185,8 +235,11 @@ impl Simulation {
             let k = b.k;
             for i in 0..b.len() {
                 let ke = b.element_stiffness(i);
-                let u: Vec<f64> =
-                    b.element_nodes(i).iter().flat_map(|&v| self.displacement[v as usize]).collect();
+                let u: Vec<f64> = b
+                    .element_nodes(i)
+                    .iter()
+                    .flat_map(|&v| self.displacement[v as usize])
+                    .collect();
                 for r in 0..3 * k {
                     let row = &ke[r * 3 * k..(r + 1) * 3 * k];
                     e += 0.5 * u[r] * row.iter().zip(&u).map(|(a, b)| a * b).sum::<f64>();
@@ -198,7 +251,11 @@ impl Simulation {
 
     /// Kinetic energy `½ Σ m_i |v_i|²` (J).
     pub fn kinetic_energy(&self) -> f64 {
-        self.masses.iter().zip(&self.velocity).map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
+        self.masses
+            .iter()
+            .zip(&self.velocity)
+            .map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]))
+            .sum()
     }
 
     /// The Dirichlet constraints of the current fixed regions; nodes that
@@ -222,6 +279,9 @@ impl Simulation {
                 (0..3).for_each(|d| c.fix(3 * i + d, u[d]));
             }
         }
+        for (&i, u) in &self.pinned {
+            (0..3).for_each(|d| c.fix(3 * i as usize + d, u[d]));
+        }
         c
     }
 
@@ -232,10 +292,16 @@ impl Simulation {
         let mut values = vec![0.0; self.pattern.nnz()];
         let store = &self.store;
         self.timings.time(Phase::Assembly, || {
-            self.pattern.assemble(store, &mut values, |b, i, out| out.copy_from_slice(store.batches[b].element_stiffness(i)))
+            self.pattern.assemble(store, &mut values, |b, i, out| {
+                out.copy_from_slice(store.batches[b].element_stiffness(i))
+            })
         });
         let g = self.params.gravity;
-        let mut rhs: Vec<f64> = self.masses.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
+        let mut rhs: Vec<f64> = self
+            .masses
+            .iter()
+            .flat_map(|&m| [m * g[0], m * g[1], m * g[2]])
+            .collect();
         let constraints = self.constraints();
         constraints.apply(&self.pattern, &mut values, &mut rhs);
         let matrix = self.pattern.matrix(&values);

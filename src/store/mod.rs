@@ -18,7 +18,11 @@ use crate::mesh::PolyMesh;
 pub enum BasisError {
     /// No basis family handles this element yet.
     #[error("element {element} has {vertices} vertices and {faces} faces; only linear tetrahedra are supported by this build")]
-    UnsupportedElement { element: usize, vertices: usize, faces: usize },
+    UnsupportedElement {
+        element: usize,
+        vertices: usize,
+        faces: usize,
+    },
     /// The element is flat or inverted at rest.
     #[error("element {element} is degenerate (volume {volume:.3e} m^3)")]
     DegenerateElement { element: usize, volume: f64 },
@@ -90,11 +94,18 @@ impl ElementStore {
         let mut by_k: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
         for (e, el) in mesh.elements.iter().enumerate() {
             if !is_tet(mesh, e) {
-                return Err(BasisError::UnsupportedElement { element: e, vertices: el.nodes.len(), faces: el.faces.len() });
+                return Err(BasisError::UnsupportedElement {
+                    element: e,
+                    vertices: el.nodes.len(),
+                    faces: el.faces.len(),
+                });
             }
             by_k.entry(el.nodes.len()).or_default().push(e as u32);
         }
-        let mut store = ElementStore { batches: Vec::new(), locate: vec![(0, 0); mesh.elements.len()] };
+        let mut store = ElementStore {
+            batches: Vec::new(),
+            locate: vec![(0, 0); mesh.elements.len()],
+        };
         for (b, (k, elements)) in by_k.into_iter().enumerate() {
             for (i, &e) in elements.iter().enumerate() {
                 store.locate[e as usize] = (b as u32, i as u32);
@@ -150,7 +161,10 @@ impl ElementStore {
 fn build_tet_batch(mesh: &PolyMesh, material: &Material, k: usize, elements: Vec<u32>) -> Result<Batch, BasisError> {
     let (lambda, mu) = material.lame();
     let n = elements.len();
-    let nodes: Vec<u32> = elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()).collect();
+    let nodes: Vec<u32> = elements
+        .iter()
+        .flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied())
+        .collect();
     let rest: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
     let mut volume = vec![0.0; n];
     let mut stiffness = vec![0.0; n * 9 * k * k];
@@ -177,5 +191,14 @@ fn build_tet_batch(mesh: &PolyMesh, material: &Material, k: usize, elements: Vec
             cleave_kernels::elasticity::element_stiffness(&g, &[v], k, lambda, mu, ke);
             Ok(())
         })?;
-    Ok(Batch { k, elements, nodes, rest, volume, mass_fraction: vec![0.25; n * k], stiffness, stress_grads })
+    Ok(Batch {
+        k,
+        elements,
+        nodes,
+        rest,
+        volume,
+        mass_fraction: vec![0.25; n * k],
+        stiffness,
+        stress_grads,
+    })
 }

@@ -1,0 +1,148 @@
+//! Scenes through the public API and through the `cleave` program: the
+//! shipped scenes run, and bad input ends in one clear error line.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use cleave::scene::{LoadedScene, SceneError};
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn patch_test_scene_reproduces_the_linear_field() {
+    let scene = LoadedScene::load(&root().join("scenes/patch_test_tet.toml")).unwrap();
+    let mut sim = scene.build_simulation().unwrap();
+    sim.solve_static().unwrap();
+    let f = &scene.scene.fixed[0];
+    let mut interior = 0;
+    for (x, u) in sim.mesh().nodes.iter().zip(sim.displacements()) {
+        interior += usize::from(x.iter().all(|&c| c > 0.01 && c < 0.99));
+        for (i, ui) in u.iter().enumerate() {
+            let want = f.displacement[i] + (0..3).map(|j| f.gradient[i][j] * x[j]).sum::<f64>();
+            assert!((ui - want).abs() < 1e-9 * 0.02, "node {x:?}: {ui} vs {want}");
+        }
+    }
+    assert_eq!(interior, 27);
+}
+
+fn cleave(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_cleave")).args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+/// Runs `cleave run` on a scene text and returns its error output, checking
+/// that it failed cleanly with exactly one line and no panic.
+fn run_fails(dir: &Path, scene: &str) -> String {
+    let p = dir.join("scene.toml");
+    std::fs::write(&p, scene).unwrap();
+    let (ok, _, err) = cleave(&["run", p.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+    assert!(!ok, "must fail: {scene}");
+    assert!(!err.contains("panicked") && !err.contains("backtrace"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    assert!(err.starts_with("error: "), "{err}");
+    err
+}
+
+const MEDIT: &str = "MeshVersionFormatted 2\nDimension 3\nVertices\n4\n0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\nTetrahedra\n1\n1 2 3 4 1\nEnd\n";
+
+fn scene_with_mesh(file: &str) -> String {
+    format!("[mesh]\nfile = \"{file}\"\n[material]\nyoung = 1e5\npoisson = 0.3\ndensity = 1000\n[[fixed]]\nbox = {{ min = [-1, -1, -1], max = [0.01, 2, 2] }}\n")
+}
+
+#[test]
+fn bad_input_ends_in_one_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // the good mesh runs
+    std::fs::write(d.join("good.mesh"), MEDIT).unwrap();
+    let p = d.join("good.toml");
+    std::fs::write(&p, scene_with_mesh("good.mesh")).unwrap();
+    let (ok, _, err) = cleave(&["run", p.to_str().unwrap(), "--out", d.join("o").to_str().unwrap()]);
+    assert!(ok, "{err}");
+    // missing scene
+    let (ok, _, err) = cleave(&["run", d.join("nope.toml").to_str().unwrap()]);
+    assert!(!ok && err.contains("nope.toml") && !err.contains("panicked"), "{err}");
+    // missing mesh file
+    let err = run_fails(d, &scene_with_mesh("missing.mesh"));
+    assert!(err.contains("missing.mesh"), "{err}");
+    // malformed meshes: truncated, wrong counts, NaN, index out of range
+    let cases = [
+        ("trunc.mesh", MEDIT[..MEDIT.len() - 12].to_string(), "end of file"),
+        (
+            "count.mesh",
+            MEDIT.replace("Vertices\n4", "Vertices\n5"),
+            "count.mesh:9:",
+        ),
+        ("nan.mesh", MEDIT.replace("1 0 0 1", "NaN 0 0 1"), "not finite"),
+        ("index.mesh", MEDIT.replace("1 2 3 4 1", "1 2 3 8 1"), "out of range"),
+    ];
+    for (name, text, want) in cases {
+        std::fs::write(d.join(name), text).unwrap();
+        let err = run_fails(d, &scene_with_mesh(name));
+        assert!(err.contains(name), "names the file: {err}");
+        assert!(err.contains(want), "{err}");
+    }
+    // unknown key, with its name and line
+    let err = run_fails(
+        d,
+        &scene_with_mesh("good.mesh").replace("[[fixed]]", "bogus_key = 1\n[[fixed]]"),
+    );
+    assert!(err.contains("bogus_key") && err.contains("scene.toml:7:"), "{err}");
+    // negative Young's modulus, with the allowed range and the line
+    let err = run_fails(d, &scene_with_mesh("good.mesh").replace("young = 1e5", "young = -5"));
+    assert!(
+        err.contains("material.young") && err.contains("> 0") && err.contains("scene.toml:4:"),
+        "{err}"
+    );
+    // a Poisson ratio of 0.5
+    let err = run_fails(
+        d,
+        &scene_with_mesh("good.mesh").replace("poisson = 0.3", "poisson = 0.5"),
+    );
+    assert!(err.contains("(-1, 0.5)"), "{err}");
+    // an unconstrained body is singular
+    let err = run_fails(
+        d,
+        &scene_with_mesh("good.mesh").replace("[[fixed]]\nbox = { min = [-1, -1, -1], max = [0.01, 2, 2] }\n", ""),
+    );
+    assert!(err.contains("not positive definite"), "{err}");
+}
+
+#[test]
+fn scene_errors_are_typed() {
+    let e = LoadedScene::parse(Path::new("x.toml"), "[mesh]\nfile = \"a\"\n".into()).unwrap_err();
+    assert!(matches!(e, SceneError::Parse { line: 1, .. }), "{e}");
+    assert!(e.to_string().contains("material"), "{e}");
+}
+
+#[test]
+fn cantilever_scene_runs_and_writes_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let out: PathBuf = dir.path().join("o");
+    let (ok, stdout, err) = cleave(&[
+        "run",
+        "scenes/cantilever_tet.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--threads",
+        "1",
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("12288 elements"), "{stdout}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["start"]["elements"], 12288);
+    assert_eq!(summary["components_end"], 1);
+    assert!((summary["end"]["volume"].as_f64().unwrap() - 4.0).abs() < 1e-9);
+    assert!(summary["max_displacement"].as_f64().unwrap() > 30.0);
+    assert!(out.join("frame_0000.vtu").exists() && out.join("frame_0000.obj").exists());
+    let (ok, stdout, err) = cleave(&["info", "assets/bunny_5k.mesh"]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("6916") && stdout.contains("validation: ok"), "{stdout}");
+}

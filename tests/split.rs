@@ -1,0 +1,161 @@
+//! Global plane splits keep the mesh valid and conforming and conserve
+//! volume and boundary area, on random planes through tet, hex and
+//! already-split meshes.
+
+use cleave::mesh::PolyMesh;
+use cleave::meshing::{box_hex, box_tet, random_convex};
+use cleave::topology::{split_by_plane, Plane, SplitOptions};
+use proptest::prelude::*;
+
+/// Splits `mesh` and checks every invariant of a split.
+fn split_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
+    let (v0, a0, e0, n0) = (
+        mesh.total_volume(),
+        mesh.boundary_area(),
+        mesh.elements.len(),
+        mesh.nodes.len(),
+    );
+    let report = split_by_plane(&mut mesh, &plane, &SplitOptions::default()).expect("split succeeds");
+    assert_eq!(mesh.elements.len(), e0 + report.split_elements.len());
+    assert_eq!(mesh.nodes.len(), n0 + report.new_nodes.len());
+    let (v1, a1) = (mesh.total_volume(), mesh.boundary_area());
+    assert!((v1 - v0).abs() <= 1e-12 * v0, "volume {v0} -> {v1}");
+    // an unshared interior face would add its area twice to the boundary
+    assert!((a1 - a0).abs() <= 1e-11 * a0, "boundary area {a0} -> {a1}");
+    if let Err(e) = mesh.validate() {
+        panic!("invalid after split: {e}");
+    }
+    for e in 0..mesh.elements.len() {
+        assert!(mesh.element_volume(e) > 0.0);
+        assert!(
+            mesh.is_convex(e, SplitOptions::default().snap),
+            "element {e} not convex"
+        );
+    }
+    // the two parts of a split element lie on opposite sides of the plane
+    let n = plane.normal;
+    let side = |e: u32| {
+        let c = mesh.element_centroid(e as usize);
+        (0..3).map(|i| (c[i] - plane.point[i]) * n[i]).sum::<f64>()
+    };
+    for &(pos, neg) in &report.split_elements {
+        assert!(side(pos) > 0.0 && side(neg) < 0.0);
+    }
+    // new nodes lie on the plane and strictly inside their edge
+    for nn in &report.new_nodes {
+        assert!(nn.t > 0.0 && nn.t < 1.0);
+        let p = mesh.nodes[nn.id as usize];
+        let d: f64 =
+            (0..3).map(|i| (p[i] - plane.point[i]) * n[i]).sum::<f64>() / (n.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        assert!(d.abs() < 1e-12);
+    }
+    mesh
+}
+
+fn plane_strategy() -> impl Strategy<Value = Plane> {
+    (
+        0.05f64..0.95,
+        0.05f64..0.95,
+        0.05f64..0.95,
+        -1.0f64..1.0,
+        -1.0f64..1.0,
+        -1.0f64..1.0,
+    )
+        .prop_filter("non-zero normal", |p| p.3.abs() + p.4.abs() + p.5.abs() > 1e-3)
+        .prop_map(|(x, y, z, a, b, c)| Plane {
+            point: [x, y, z],
+            normal: [a, b, c],
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn split_tet_box(plane in plane_strategy()) {
+        split_and_check(box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap(), plane);
+    }
+
+    #[test]
+    fn split_hex_box(plane in plane_strategy()) {
+        split_and_check(box_hex([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap(), plane);
+    }
+
+    #[test]
+    fn split_already_split(seed in 0u64..10_000, plane in plane_strategy(), second in plane_strategy()) {
+        let mesh = random_convex([0.0; 3], [1.0; 3], 6, seed).unwrap();
+        let mesh = split_and_check(mesh, plane);
+        split_and_check(mesh, second);
+    }
+}
+
+#[test]
+fn plane_through_grid_nodes_snaps_instead_of_making_needles() {
+    // x = 0.5 passes exactly through a layer of nodes of a 2-cell box
+    let mesh = box_hex([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+    let mut m = mesh.clone();
+    let r = split_by_plane(
+        &mut m,
+        &Plane {
+            point: [0.5, 0.0, 0.0],
+            normal: [1.0, 0.0, 0.0],
+        },
+        &SplitOptions::default(),
+    )
+    .unwrap();
+    assert!(
+        r.new_nodes.is_empty() && r.split_elements.is_empty(),
+        "a plane along element faces splits nothing"
+    );
+    // slightly off the node layer: within the snap distance nothing is split either
+    let r = split_by_plane(
+        &mut m,
+        &Plane {
+            point: [0.5 + 1e-7, 0.0, 0.0],
+            normal: [1.0, 0.0, 0.0],
+        },
+        &SplitOptions::default(),
+    )
+    .unwrap();
+    assert!(r.new_nodes.is_empty());
+    assert_eq!(m, mesh);
+}
+
+#[test]
+fn random_convex_is_reproducible_and_valid() {
+    let a = random_convex([0.0; 3], [1.0; 3], 8, 7).unwrap();
+    let b = random_convex([0.0; 3], [1.0; 3], 8, 7).unwrap();
+    assert_eq!(a, b);
+    a.validate().unwrap();
+    assert!((a.total_volume() - 1.0).abs() < 1e-12);
+    assert!(
+        a.elements.len() >= 9,
+        "8 planes through a cube make many cells, got {}",
+        a.elements.len()
+    );
+    let c = random_convex([0.0; 3], [1.0; 3], 8, 8).unwrap();
+    assert_ne!(a, c);
+}
+
+#[test]
+fn invalid_plane_is_an_error() {
+    let mut m = box_hex([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+    assert!(split_by_plane(
+        &mut m,
+        &Plane {
+            point: [0.5; 3],
+            normal: [0.0; 3]
+        },
+        &SplitOptions::default()
+    )
+    .is_err());
+    assert!(split_by_plane(
+        &mut m,
+        &Plane {
+            point: [f64::NAN; 3],
+            normal: [1.0, 0.0, 0.0]
+        },
+        &SplitOptions::default()
+    )
+    .is_err());
+}
