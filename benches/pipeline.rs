@@ -19,9 +19,9 @@ fn pipeline(c: &mut Criterion) {
         let n = mesh.elements.len();
         group.throughput(Throughput::Elements(n as u64));
         group.bench_with_input(BenchmarkId::new("stiffness", n), &mesh, |b, m| {
-            b.iter(|| ElementStore::build(m, &material).unwrap())
+            b.iter(|| ElementStore::build(m, &material, &Default::default()).unwrap())
         });
-        let store = ElementStore::build(&mesh, &material).unwrap();
+        let store = ElementStore::build(&mesh, &material, &Default::default()).unwrap();
         group.bench_with_input(BenchmarkId::new("pattern", n), &store, |b, s| {
             b.iter(|| SparsePattern::build(mesh.nodes.len(), s))
         });
@@ -30,9 +30,8 @@ fn pipeline(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("assembly", n), |b| {
             b.iter(|| {
                 values.fill(0.0);
-                pattern.assemble(&store, &mut values, |bi, i, o| {
-                    o.copy_from_slice(store.batches[bi].element_stiffness(i))
-                })
+                pattern
+                    .assemble(&store, &mut values, |bi, i, o| o.copy_from_slice(store.batches[bi].element_stiffness(i)))
             })
         });
         for d in 0..3 * mesh.nodes.len() {

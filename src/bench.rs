@@ -9,7 +9,7 @@ use crate::assembly::SparsePattern;
 use crate::material::Material;
 use crate::meshing::box_tet;
 use crate::solve::{Cholesky, LinearSolver};
-use crate::store::ElementStore;
+use crate::store::{BasisOptions, ElementStore};
 use crate::Error;
 
 /// One measured stage.
@@ -48,10 +48,7 @@ impl Report {
             self.threads, "stage", "mesh", "elements", "ms", "elements/s"
         );
         for m in &self.measurements {
-            s += &format!(
-                "{:<24} {:<22} {:>10} {:>12.3} {:>16.0}",
-                m.name, m.mesh, m.elements, m.ms, m.elements_per_s
-            );
+            s += &format!("{:<24} {:<22} {:>10} {:>12.3} {:>16.0}", m.name, m.mesh, m.elements, m.ms, m.elements_per_s);
             if let Some((k, v)) = &m.extra {
                 s += &format!("  {k} = {v:.0}");
             }
@@ -93,7 +90,7 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
             extra,
         })
     };
-    let (ms, store) = best_ms(5, || ElementStore::build(&mesh, &material));
+    let (ms, store) = best_ms(5, || ElementStore::build(&mesh, &material, &BasisOptions::default()));
     let store = store?;
     push("tet K_e build", ms, None);
     let (ms, pattern) = best_ms(3, || SparsePattern::build(mesh.nodes.len(), &store));
@@ -101,19 +98,13 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let mut values = vec![0.0; pattern.nnz()];
     let (ms, ()) = best_ms(5, || {
         values.fill(0.0);
-        pattern.assemble(&store, &mut values, |b, i, o| {
-            o.copy_from_slice(store.batches[b].element_stiffness(i))
-        })
+        pattern.assemble(&store, &mut values, |b, i, o| o.copy_from_slice(store.batches[b].element_stiffness(i)))
     });
     push("assembly", ms, None);
     let mut chol = Cholesky::default();
     let (ms, r) = best_ms(1, || chol.analyze(pattern.symbolic.as_ref()));
     r?;
-    push(
-        "cholesky symbolic",
-        ms,
-        Some(("nnz(L)".into(), chol.factor_nnz() as f64)),
-    );
+    push("cholesky symbolic", ms, Some(("nnz(L)".into(), chol.factor_nnz() as f64)));
     // a regular matrix: K plus a mass-like diagonal
     for d in 0..3 * nn {
         values[pattern.diagonal_slot(d)] += 1e3;
@@ -126,8 +117,5 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let (ms, r) = best_ms(3, || chol.solve(&b, &mut x));
     r?;
     push("cholesky solve", ms, None);
-    Ok(Report {
-        threads: rayon::current_num_threads(),
-        measurements: out,
-    })
+    Ok(Report { threads: rayon::current_num_threads(), measurements: out })
 }

@@ -29,18 +29,10 @@ impl Material {
     /// Checks `E > 0`, `-1 < ν < 0.5`, `ρ > 0`, all finite.
     pub fn new(young: f64, poisson: f64, density: f64) -> Result<Self, MaterialError> {
         if !(young > 0.0 && young.is_finite()) {
-            return Err(MaterialError {
-                name: "young",
-                value: young,
-                allowed: "must be a finite number > 0 (Pa)",
-            });
+            return Err(MaterialError { name: "young", value: young, allowed: "must be a finite number > 0 (Pa)" });
         }
         if !(poisson > -1.0 && poisson < 0.5) {
-            return Err(MaterialError {
-                name: "poisson",
-                value: poisson,
-                allowed: "must lie in (-1, 0.5)",
-            });
+            return Err(MaterialError { name: "poisson", value: poisson, allowed: "must lie in (-1, 0.5)" });
         }
         if !(density > 0.0 && density.is_finite()) {
             return Err(MaterialError {
@@ -49,11 +41,7 @@ impl Material {
                 allowed: "must be a finite number > 0 (kg/m^3)",
             });
         }
-        Ok(Material {
-            young,
-            poisson,
-            density,
-        })
+        Ok(Material { young, poisson, density })
     }
 
     /// Lamé parameters `(λ, μ)` in Pa.

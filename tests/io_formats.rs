@@ -16,31 +16,15 @@ fn assets() -> &'static Path {
 
 /// A small irregular tet + hex test set as cells.
 fn tet_cells() -> (Vec<[f64; 3]>, Vec<Cell>) {
-    let nodes = vec![
-        [0.0, 0.0, 0.0],
-        [1.0, 0.1, 0.0],
-        [0.2, 1.0, 0.1],
-        [0.1, 0.2, 1.3],
-        [1.1, 1.2, 0.9],
-        [0.3, -0.1, -1.0],
-    ];
-    (
-        nodes,
-        vec![
-            Cell::Tet([0, 1, 2, 3]),
-            Cell::Tet([1, 2, 3, 4]),
-            Cell::Tet([0, 2, 1, 5]),
-        ],
-    )
+    let nodes =
+        vec![[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.2, 1.0, 0.1], [0.1, 0.2, 1.3], [1.1, 1.2, 0.9], [0.3, -0.1, -1.0]];
+    (nodes, vec![Cell::Tet([0, 1, 2, 3]), Cell::Tet([1, 2, 3, 4]), Cell::Tet([0, 2, 1, 5])])
 }
 
 fn hex_cells() -> (Vec<[f64; 3]>, Vec<Cell>) {
     let m = box_hex([0.0; 3], [2.0, 1.0, 1.0], [2, 1, 1]).unwrap();
     let nodes = m.nodes.clone();
-    let cells = vec![
-        Cell::Hex([0, 1, 4, 3, 6, 7, 10, 9]),
-        Cell::Hex([1, 2, 5, 4, 7, 8, 11, 10]),
-    ];
+    let cells = vec![Cell::Hex([0, 1, 4, 3, 6, 7, 10, 9]), Cell::Hex([1, 2, 5, 4, 7, 8, 11, 10])];
     (nodes, cells)
 }
 
@@ -97,16 +81,8 @@ fn vtu_round_trip_with_polyhedra() {
     let mesh = random_convex([0.0; 3], [1.0; 3], 6, 3).unwrap();
     let p = dir.path().join("m.vtu");
     let u: Vec<[f64; 3]> = mesh.nodes.iter().map(|x| [0.1 * x[0], 0.0, -x[2]]).collect();
-    write_vtu(
-        &p,
-        &mesh,
-        &mesh.nodes,
-        &VtuFields {
-            point_vectors: vec![("displacement", &u)],
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    write_vtu(&p, &mesh, &mesh.nodes, &VtuFields { point_vectors: vec![("displacement", &u)], ..Default::default() })
+        .unwrap();
     let back = read_vtu(&p).unwrap();
     back.validate().unwrap();
     assert_eq!(back.elements.len(), mesh.elements.len());
@@ -183,36 +159,22 @@ fn malformed_medit_files() {
     assert!(msg.contains("end of file") || msg.contains("expected"), "{msg}");
     assert!(line >= 10);
     // wrong vertex count: the 'Tetrahedra' keyword is read as a coordinate
-    let (line, msg) = parse_error(read_medit(&write(
-        d,
-        "c.mesh",
-        &GOOD_MEDIT.replace("Vertices\n4", "Vertices\n5"),
-    )));
+    let (line, msg) = parse_error(read_medit(&write(d, "c.mesh", &GOOD_MEDIT.replace("Vertices\n4", "Vertices\n5"))));
     assert_eq!(line, 9);
     assert!(msg.contains("Tetrahedra"), "{msg}");
     // NaN coordinate
-    let (line, msg) = parse_error(read_medit(&write(
-        d,
-        "n.mesh",
-        &GOOD_MEDIT.replace("1 0 0 1", "nan 0 0 1"),
-    )));
+    let (line, msg) = parse_error(read_medit(&write(d, "n.mesh", &GOOD_MEDIT.replace("1 0 0 1", "nan 0 0 1"))));
     assert_eq!(line, 6);
     assert!(msg.contains("not finite"), "{msg}");
     // index out of range
-    let (line, msg) = parse_error(read_medit(&write(
-        d,
-        "i.mesh",
-        &GOOD_MEDIT.replace("1 2 3 4 1", "1 2 3 9 1"),
-    )));
+    let (line, msg) = parse_error(read_medit(&write(d, "i.mesh", &GOOD_MEDIT.replace("1 2 3 4 1", "1 2 3 9 1"))));
     assert_eq!(line, 11);
     assert!(msg.contains("9") && msg.contains("out of range"), "{msg}");
     // unknown keyword
     let (_, msg) = parse_error(read_medit(&write(d, "k.mesh", &GOOD_MEDIT.replace("End", "Bogus 3"))));
     assert!(msg.contains("Bogus"));
     // the error's Display names the file and line
-    let e = read_medit(&write(d, "x.mesh", &GOOD_MEDIT.replace("1 2 3 4 1", "1 2 3 9 1")))
-        .unwrap_err()
-        .to_string();
+    let e = read_medit(&write(d, "x.mesh", &GOOD_MEDIT.replace("1 2 3 4 1", "1 2 3 9 1"))).unwrap_err().to_string();
     assert!(e.contains("x.mesh:11:"), "{e}");
 }
 
@@ -225,18 +187,11 @@ fn malformed_tetgen_gmsh_vtu_files() {
     let (line, msg) = parse_error(read_tetgen(&d.join("a.ele")));
     assert_eq!(line, 2);
     assert!(msg.contains("out of range"), "{msg}");
-    let gm = write(
-        d,
-        "g.msh",
-        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 2 1 2\n3 1 0 2\n1\n",
-    );
+    let gm = write(d, "g.msh", "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 2 1 2\n3 1 0 2\n1\n");
     assert!(matches!(read_gmsh(&gm), Err(IoError::Parse { .. })));
     let vtu = write(d, "v.vtu", "<VTKFile type=\"UnstructuredGrid\"><UnstructuredGrid><Piece><Points><DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">0 0 0 1 0 0 0 1 0 0 0 1</DataArray></Points><Cells><DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">0 1 2 7</DataArray><DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">4</DataArray><DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">10</DataArray></Cells></Piece></UnstructuredGrid></VTKFile>");
     let (_, msg) = parse_error(read_vtu(&vtu));
     assert!(msg.contains("point 7"), "{msg}");
     assert!(matches!(read_mesh(&d.join("missing.mesh")), Err(IoError::Os { .. })));
-    assert!(matches!(
-        read_mesh(&d.join("surface.obj")),
-        Err(IoError::Unsupported { .. })
-    ));
+    assert!(matches!(read_mesh(&d.join("surface.obj")), Err(IoError::Unsupported { .. })));
 }

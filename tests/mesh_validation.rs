@@ -40,25 +40,11 @@ fn non_finite_coordinate() {
 #[test]
 fn index_out_of_range() {
     let (e, m) = message(PolyMesh::from_cells(tet_nodes(), &[Cell::Tet([0, 1, 2, 7])]));
-    assert_eq!(
-        e,
-        MeshError::NodeIndexOutOfRange {
-            element: 0,
-            index: 7,
-            nodes: 4
-        }
-    );
+    assert_eq!(e, MeshError::NodeIndexOutOfRange { element: 0, index: 7, nodes: 4 });
     assert!(m.contains("element 0") && m.contains("node 7"));
     let mut mesh = unit_tet();
     mesh.elements[0].faces[0].face = 99;
-    assert!(matches!(
-        mesh.validate(),
-        Err(MeshError::FaceIndexOutOfRange {
-            element: 0,
-            index: 99,
-            ..
-        })
-    ));
+    assert!(matches!(mesh.validate(), Err(MeshError::FaceIndexOutOfRange { element: 0, index: 99, .. })));
 }
 
 #[test]
@@ -91,17 +77,7 @@ fn open_element() {
     let mut mesh = unit_tet();
     mesh.elements[0].faces.pop();
     let (e, m) = message(mesh.validate());
-    assert!(
-        matches!(
-            e,
-            MeshError::OpenElement {
-                element: 0,
-                count: 1,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, MeshError::OpenElement { element: 0, count: 1, .. }), "{e}");
     assert!(m.contains("not closed"));
     let (e, _) = message(mesh.orient());
     assert!(matches!(e, MeshError::OpenElement { .. }));
@@ -112,10 +88,7 @@ fn inconsistent_orientation_is_reported_and_fixed_by_orient() {
     let mut mesh = unit_tet();
     mesh.elements[0].faces[1].outward = !mesh.elements[0].faces[1].outward;
     let (e, m) = message(mesh.validate());
-    assert!(
-        matches!(e, MeshError::InconsistentOrientation { element: 0, .. }),
-        "{e}"
-    );
+    assert!(matches!(e, MeshError::InconsistentOrientation { element: 0, .. }), "{e}");
     assert!(m.contains("orient"));
     mesh.orient().unwrap();
     mesh.validate().unwrap();
@@ -140,26 +113,14 @@ fn zero_volume_element() {
     let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
     let mesh = PolyMesh {
         nodes,
-        faces: faces
-            .iter()
-            .map(|f| Face {
-                vertices: f.to_vec(),
-                triangles: vec![*f],
-            })
-            .collect(),
+        faces: faces.iter().map(|f| Face { vertices: f.to_vec(), triangles: vec![*f] }).collect(),
         elements: vec![Element {
             faces: (0..4).map(|f| FaceRef { face: f, outward: true }).collect(),
             nodes: vec![0, 1, 2, 3],
         }],
     };
     let (e, m) = message(mesh.validate());
-    assert!(
-        matches!(
-            e,
-            MeshError::NonPositiveVolume { element: 0, .. } | MeshError::ZeroAreaFace { .. }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, MeshError::NonPositiveVolume { element: 0, .. } | MeshError::ZeroAreaFace { .. }), "{e}");
     assert!(m.contains("volume") || m.contains("zero area"));
     assert!(mesh.clone().orient().is_err());
 }
@@ -182,25 +143,15 @@ fn face_shared_by_three_elements() {
     let mut nodes = tet_nodes();
     nodes.push([1.0, 1.0, 1.0]);
     nodes.push([-1.0, -1.0, -1.0]);
-    let cells = [
-        Cell::Tet([0, 1, 2, 3]),
-        Cell::Tet([1, 2, 3, 4]),
-        Cell::Tet([1, 2, 3, 5]),
-    ];
+    let cells = [Cell::Tet([0, 1, 2, 3]), Cell::Tet([1, 2, 3, 4]), Cell::Tet([1, 2, 3, 5])];
     let (e, m) = message(PolyMesh::from_cells(nodes, &cells));
-    assert!(
-        matches!(e, MeshError::FaceSharedByMoreThanTwo { element: 2, .. }),
-        "{e}"
-    );
+    assert!(matches!(e, MeshError::FaceSharedByMoreThanTwo { element: 2, .. }), "{e}");
     assert!(m.contains("more than two"));
 }
 
 #[test]
 fn overlapping_elements() {
-    let (e, m) = message(PolyMesh::from_cells(
-        tet_nodes(),
-        &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([0, 1, 2, 3])],
-    ));
+    let (e, m) = message(PolyMesh::from_cells(tet_nodes(), &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([0, 1, 2, 3])]));
     assert!(matches!(e, MeshError::OverlappingElements { a: 0, b: 1, .. }), "{e}");
     assert!(m.contains("overlap"));
 }

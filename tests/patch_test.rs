@@ -26,10 +26,7 @@ fn patch_error(mesh: PolyMesh) -> (f64, usize) {
             face.vertices.iter().for_each(|&v| boundary[v as usize] = true);
         }
     }
-    let params = SimulationParams {
-        gravity: [0.0; 3],
-        ..Default::default()
-    };
+    let params = SimulationParams { gravity: [0.0; 3], ..Default::default() };
     let mut sim = Simulation::new(mesh, params).unwrap();
     for (i, &b) in boundary.iter().enumerate() {
         if b {

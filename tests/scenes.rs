@@ -29,11 +29,7 @@ fn patch_test_scene_reproduces_the_linear_field() {
 
 fn cleave(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_cleave")).args(args).output().unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
 }
 
 /// Runs `cleave run` on a scene text and returns its error output, checking
@@ -74,11 +70,7 @@ fn bad_input_ends_in_one_clear_error() {
     // malformed meshes: truncated, wrong counts, NaN, index out of range
     let cases = [
         ("trunc.mesh", MEDIT[..MEDIT.len() - 12].to_string(), "end of file"),
-        (
-            "count.mesh",
-            MEDIT.replace("Vertices\n4", "Vertices\n5"),
-            "count.mesh:9:",
-        ),
+        ("count.mesh", MEDIT.replace("Vertices\n4", "Vertices\n5"), "count.mesh:9:"),
         ("nan.mesh", MEDIT.replace("1 0 0 1", "NaN 0 0 1"), "not finite"),
         ("index.mesh", MEDIT.replace("1 2 3 4 1", "1 2 3 8 1"), "out of range"),
     ];
@@ -89,22 +81,13 @@ fn bad_input_ends_in_one_clear_error() {
         assert!(err.contains(want), "{err}");
     }
     // unknown key, with its name and line
-    let err = run_fails(
-        d,
-        &scene_with_mesh("good.mesh").replace("[[fixed]]", "bogus_key = 1\n[[fixed]]"),
-    );
+    let err = run_fails(d, &scene_with_mesh("good.mesh").replace("[[fixed]]", "bogus_key = 1\n[[fixed]]"));
     assert!(err.contains("bogus_key") && err.contains("scene.toml:7:"), "{err}");
     // negative Young's modulus, with the allowed range and the line
     let err = run_fails(d, &scene_with_mesh("good.mesh").replace("young = 1e5", "young = -5"));
-    assert!(
-        err.contains("material.young") && err.contains("> 0") && err.contains("scene.toml:4:"),
-        "{err}"
-    );
+    assert!(err.contains("material.young") && err.contains("> 0") && err.contains("scene.toml:4:"), "{err}");
     // a Poisson ratio of 0.5
-    let err = run_fails(
-        d,
-        &scene_with_mesh("good.mesh").replace("poisson = 0.3", "poisson = 0.5"),
-    );
+    let err = run_fails(d, &scene_with_mesh("good.mesh").replace("poisson = 0.3", "poisson = 0.5"));
     assert!(err.contains("(-1, 0.5)"), "{err}");
     // an unconstrained body is singular
     let err = run_fails(
@@ -125,14 +108,8 @@ fn scene_errors_are_typed() {
 fn cantilever_scene_runs_and_writes_frames() {
     let dir = tempfile::tempdir().unwrap();
     let out: PathBuf = dir.path().join("o");
-    let (ok, stdout, err) = cleave(&[
-        "run",
-        "scenes/cantilever_tet.toml",
-        "--out",
-        out.to_str().unwrap(),
-        "--threads",
-        "1",
-    ]);
+    let (ok, stdout, err) =
+        cleave(&["run", "scenes/cantilever_tet.toml", "--out", out.to_str().unwrap(), "--threads", "1"]);
     assert!(ok, "{err}");
     assert!(stdout.contains("12288 elements"), "{stdout}");
     let summary: serde_json::Value =

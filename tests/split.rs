@@ -9,12 +9,7 @@ use proptest::prelude::*;
 
 /// Splits `mesh` and checks every invariant of a split.
 fn split_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
-    let (v0, a0, e0, n0) = (
-        mesh.total_volume(),
-        mesh.boundary_area(),
-        mesh.elements.len(),
-        mesh.nodes.len(),
-    );
+    let (v0, a0, e0, n0) = (mesh.total_volume(), mesh.boundary_area(), mesh.elements.len(), mesh.nodes.len());
     let report = split_by_plane(&mut mesh, &plane, &SplitOptions::default()).expect("split succeeds");
     assert_eq!(mesh.elements.len(), e0 + report.split_elements.len());
     assert_eq!(mesh.nodes.len(), n0 + report.new_nodes.len());
@@ -27,10 +22,7 @@ fn split_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     }
     for e in 0..mesh.elements.len() {
         assert!(mesh.element_volume(e) > 0.0);
-        assert!(
-            mesh.is_convex(e, SplitOptions::default().snap),
-            "element {e} not convex"
-        );
+        assert!(mesh.is_convex(e, SplitOptions::default().snap), "element {e} not convex");
     }
     // the two parts of a split element lie on opposite sides of the plane
     let n = plane.normal;
@@ -53,19 +45,9 @@ fn split_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
 }
 
 fn plane_strategy() -> impl Strategy<Value = Plane> {
-    (
-        0.05f64..0.95,
-        0.05f64..0.95,
-        0.05f64..0.95,
-        -1.0f64..1.0,
-        -1.0f64..1.0,
-        -1.0f64..1.0,
-    )
+    (0.05f64..0.95, 0.05f64..0.95, 0.05f64..0.95, -1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0)
         .prop_filter("non-zero normal", |p| p.3.abs() + p.4.abs() + p.5.abs() > 1e-3)
-        .prop_map(|(x, y, z, a, b, c)| Plane {
-            point: [x, y, z],
-            normal: [a, b, c],
-        })
+        .prop_map(|(x, y, z, a, b, c)| Plane { point: [x, y, z], normal: [a, b, c] })
 }
 
 proptest! {
@@ -94,26 +76,14 @@ fn plane_through_grid_nodes_snaps_instead_of_making_needles() {
     // x = 0.5 passes exactly through a layer of nodes of a 2-cell box
     let mesh = box_hex([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
     let mut m = mesh.clone();
-    let r = split_by_plane(
-        &mut m,
-        &Plane {
-            point: [0.5, 0.0, 0.0],
-            normal: [1.0, 0.0, 0.0],
-        },
-        &SplitOptions::default(),
-    )
-    .unwrap();
-    assert!(
-        r.new_nodes.is_empty() && r.split_elements.is_empty(),
-        "a plane along element faces splits nothing"
-    );
+    let r =
+        split_by_plane(&mut m, &Plane { point: [0.5, 0.0, 0.0], normal: [1.0, 0.0, 0.0] }, &SplitOptions::default())
+            .unwrap();
+    assert!(r.new_nodes.is_empty() && r.split_elements.is_empty(), "a plane along element faces splits nothing");
     // slightly off the node layer: within the snap distance nothing is split either
     let r = split_by_plane(
         &mut m,
-        &Plane {
-            point: [0.5 + 1e-7, 0.0, 0.0],
-            normal: [1.0, 0.0, 0.0],
-        },
+        &Plane { point: [0.5 + 1e-7, 0.0, 0.0], normal: [1.0, 0.0, 0.0] },
         &SplitOptions::default(),
     )
     .unwrap();
@@ -128,11 +98,7 @@ fn random_convex_is_reproducible_and_valid() {
     assert_eq!(a, b);
     a.validate().unwrap();
     assert!((a.total_volume() - 1.0).abs() < 1e-12);
-    assert!(
-        a.elements.len() >= 9,
-        "8 planes through a cube make many cells, got {}",
-        a.elements.len()
-    );
+    assert!(a.elements.len() >= 9, "8 planes through a cube make many cells, got {}", a.elements.len());
     let c = random_convex([0.0; 3], [1.0; 3], 8, 8).unwrap();
     assert_ne!(a, c);
 }
@@ -140,22 +106,7 @@ fn random_convex_is_reproducible_and_valid() {
 #[test]
 fn invalid_plane_is_an_error() {
     let mut m = box_hex([0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
-    assert!(split_by_plane(
-        &mut m,
-        &Plane {
-            point: [0.5; 3],
-            normal: [0.0; 3]
-        },
-        &SplitOptions::default()
-    )
-    .is_err());
-    assert!(split_by_plane(
-        &mut m,
-        &Plane {
-            point: [f64::NAN; 3],
-            normal: [1.0, 0.0, 0.0]
-        },
-        &SplitOptions::default()
-    )
-    .is_err());
+    assert!(split_by_plane(&mut m, &Plane { point: [0.5; 3], normal: [0.0; 3] }, &SplitOptions::default()).is_err());
+    assert!(split_by_plane(&mut m, &Plane { point: [f64::NAN; 3], normal: [1.0, 0.0, 0.0] }, &SplitOptions::default())
+        .is_err());
 }

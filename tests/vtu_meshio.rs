@@ -14,10 +14,7 @@ use cleave::scene::{run_scene, LoadedScene, RunOptions};
 fn meshio_available() -> Result<(), String> {
     match Command::new("python3").args(["-c", "import meshio, numpy"]).output() {
         Ok(o) if o.status.success() => Ok(()),
-        Ok(o) => Err(format!(
-            "meshio is not importable: {}",
-            String::from_utf8_lossy(&o.stderr).trim()
-        )),
+        Ok(o) => Err(format!("meshio is not importable: {}", String::from_utf8_lossy(&o.stderr).trim())),
         Err(e) => Err(format!("python3 is not available: {e}")),
     }
 }
@@ -33,14 +30,7 @@ fn meshio_reads_our_tetra_and_polyhedron_files() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let scene = LoadedScene::load(&root.join("scenes/cantilever_tet.toml")).unwrap();
     let out = dir.path().join("cantilever");
-    let summary = run_scene(
-        &scene,
-        &RunOptions {
-            out: Some(out.clone()),
-            steps: None,
-        },
-    )
-    .unwrap();
+    let summary = run_scene(&scene, &RunOptions { out: Some(out.clone()), steps: None }).unwrap();
     let poly = random_convex([0.0; 3], [1.0; 3], 8, 2).unwrap();
     let poly_path = dir.path().join("poly.vtu");
     write_vtu(&poly_path, &poly, &poly.nodes, &VtuFields::default()).unwrap();

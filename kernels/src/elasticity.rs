@@ -12,6 +12,8 @@
 //! which is exactly `w B_a^T C B_b` with the 6x6 Voigt matrix `C` of
 //! [`voigt_matrix`]; a test checks the two against each other.
 
+use crate::lanes::{Lanes, Real};
+
 /// Lamé parameters `(λ, μ)` in Pa from Young's modulus `E` (Pa) and Poisson's
 /// ratio `ν` (dimensionless, `-1 < ν < 1/2`).
 #[inline]
@@ -49,32 +51,109 @@ pub fn add_block(block: &mut [f64; 9], ga: [f64; 3], gb: [f64; 3], w: f64, lambd
     }
 }
 
-/// Element stiffness `K_e = Σ_q w_q B_q^T C B_q` for `k` nodes, written as a
-/// dense row-major `3k x 3k` matrix into `ke` (overwritten).
-///
-/// Layout: `grads[q * k + a]` is `∇φ_a` at quadrature point `q`, `weights[q]`
-/// its weight in m^3; `ke.len() == 9 k^2`; entry `(3a + i, 3b + j)` lives at
-/// `ke[(3a + i) * 3k + 3b + j]`.
-pub fn element_stiffness(grads: &[[f64; 3]], weights: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]) {
-    assert_eq!(grads.len(), weights.len() * k, "one gradient per node and point");
+/// Checks the layout of a stiffness computation; panics on a caller bug.
+fn check_table(grad: &[f64], weights: &[f64], k: usize, ke: &[f64]) {
+    assert_eq!(grad.len(), 3 * k * weights.len(), "grad must hold 3 k Q values");
     assert_eq!(ke.len(), 9 * k * k, "ke must be 3k x 3k");
-    ke.fill(0.0);
+}
+
+/// `K_e` from the Gram matrix `S[r][c] = Σ_q w_q G[r][q] G[c][q]`
+/// (`r = 3a + i`): `K[3a+i][3b+j] = λ S[3a+i][3b+j] + μ S[3a+j][3b+i]
+/// + μ δ_ij Σ_l S[3a+l][3b+l]`. `s` holds the full symmetric `S`.
+fn stiffness_from_gram(s: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]) {
     let n = 3 * k;
-    for (q, &w) in weights.iter().enumerate() {
-        let g = &grads[q * k..(q + 1) * k];
-        for a in 0..k {
-            for b in 0..k {
-                let mut block = [0.0; 9];
-                add_block(&mut block, g[a], g[b], w, lambda, mu);
-                for i in 0..3 {
-                    let row = (3 * a + i) * n + 3 * b;
-                    for j in 0..3 {
-                        ke[row + j] += block[3 * i + j];
-                    }
+    for a in 0..k {
+        for b in 0..k {
+            let tr = (0..3).map(|l| s[(3 * a + l) * n + 3 * b + l]).sum::<f64>();
+            for i in 0..3 {
+                for j in 0..3 {
+                    let v = lambda * s[(3 * a + i) * n + 3 * b + j] + mu * s[(3 * a + j) * n + 3 * b + i];
+                    ke[(3 * a + i) * n + 3 * b + j] = v + if i == j { mu * tr } else { 0.0 };
                 }
             }
         }
     }
+}
+
+/// Element stiffness `K_e = Σ_q w_q B_q^T C B_q` (N/m) for `k` nodes from a
+/// gradient table, scalar reference of [`element_stiffness`].
+///
+/// Layout: `grad[(3a + i) Q + q]` is component `i` of `∇φ_a` at point `q`
+/// (1/m), `weights[q]` its weight (m^3), `ke` the dense row-major
+/// `3k x 3k` result (entry `(3a + i, 3b + j)` at `(3a + i) 3k + 3b + j`),
+/// `gram` scratch of `9 k^2` values.
+pub fn element_stiffness_scalar(
+    grad: &[f64],
+    weights: &[f64],
+    k: usize,
+    lambda: f64,
+    mu: f64,
+    gram: &mut [f64],
+    ke: &mut [f64],
+) {
+    check_table(grad, weights, k, ke);
+    let (n, nq) = (3 * k, weights.len());
+    for r in 0..n {
+        for c in r..n {
+            let (gr, gc) = (&grad[r * nq..(r + 1) * nq], &grad[c * nq..(c + 1) * nq]);
+            let v: f64 = (0..nq).map(|q| weights[q] * gr[q] * gc[q]).sum();
+            gram[r * n + c] = v;
+            gram[c * n + r] = v;
+        }
+    }
+    stiffness_from_gram(gram, k, lambda, mu, ke);
+}
+
+struct Gram<'a> {
+    grad: &'a [f64],
+    weights: &'a [f64],
+    n: usize,
+    gram: &'a mut [f64],
+}
+
+impl pulp::WithSimd for Gram<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        let Gram { grad, weights, n, gram } = self;
+        let nq = weights.len();
+        let width = Lanes::<S>::WIDTH;
+        for r in 0..n {
+            let gr = &grad[r * nq..(r + 1) * nq];
+            for c in r..n {
+                let gc = &grad[c * nq..(c + 1) * nq];
+                let mut acc = Lanes::splat(simd, 0.0);
+                for q0 in (0..nq).step_by(width) {
+                    let e = (q0 + width).min(nq);
+                    let w = Lanes::load(simd, &weights[q0..e]);
+                    let a = Lanes::load(simd, &gr[q0..e]);
+                    let b = Lanes::load(simd, &gc[q0..e]);
+                    acc = (w * a).mul_add(b, acc);
+                }
+                let v = acc.reduce_sum();
+                gram[r * n + c] = v;
+                gram[c * n + r] = v;
+            }
+        }
+    }
+}
+
+/// Element stiffness from a gradient table (see
+/// [`element_stiffness_scalar`] for the layout), SIMD over quadrature points
+/// with the instruction set chosen at run time.
+pub fn element_stiffness(
+    grad: &[f64],
+    weights: &[f64],
+    k: usize,
+    lambda: f64,
+    mu: f64,
+    gram: &mut [f64],
+    ke: &mut [f64],
+) {
+    check_table(grad, weights, k, ke);
+    assert_eq!(gram.len(), 9 * k * k, "gram scratch must be 3k x 3k");
+    pulp::Arch::new().dispatch(Gram { grad, weights, n: 3 * k, gram });
+    stiffness_from_gram(gram, k, lambda, mu, ke);
 }
 
 /// Cauchy stress (Pa, Voigt order) of the displacement gradient
@@ -107,14 +186,7 @@ mod tests {
 
     /// `B_a` (6x3) for gradient `g` in Voigt order `[xx, yy, zz, xy, xz, yz]`.
     fn b_matrix(g: [f64; 3]) -> [[f64; 3]; 6] {
-        [
-            [g[0], 0.0, 0.0],
-            [0.0, g[1], 0.0],
-            [0.0, 0.0, g[2]],
-            [g[1], g[0], 0.0],
-            [g[2], 0.0, g[0]],
-            [0.0, g[2], g[1]],
-        ]
+        [[g[0], 0.0, 0.0], [0.0, g[1], 0.0], [0.0, 0.0, g[2]], [g[1], g[0], 0.0], [g[2], 0.0, g[0]], [0.0, g[2], g[1]]]
     }
 
     #[test]
@@ -136,6 +208,37 @@ mod tests {
                 }
                 let want = 0.37 * s;
                 assert!((block[3 * i + j] - want).abs() <= 1e-12 * want.abs().max(1.0), "{i}{j}");
+            }
+        }
+    }
+
+    #[test]
+    fn simd_stiffness_matches_scalar_and_block_formula() {
+        let (l, m) = lame(3e5, 0.31);
+        let (k, nq) = (5, 7);
+        let grad: Vec<f64> = (0..3 * k * nq).map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0).collect();
+        let weights: Vec<f64> = (0..nq).map(|q| 0.1 + q as f64 * 0.03).collect();
+        let (mut gram, mut a, mut b) = (vec![0.0; 9 * k * k], vec![0.0; 9 * k * k], vec![0.0; 9 * k * k]);
+        element_stiffness_scalar(&grad, &weights, k, l, m, &mut gram, &mut a);
+        element_stiffness(&grad, &weights, k, l, m, &mut gram, &mut b);
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-13 * x.abs().max(1e3), "{x} vs {y}");
+        }
+        // against the block formula, point by point
+        let n = 3 * k;
+        for aa in 0..k {
+            for bb in 0..k {
+                let mut block = [0.0; 9];
+                for q in 0..nq {
+                    let g = |v: usize| [0, 1, 2].map(|i| grad[(3 * v + i) * nq + q]);
+                    add_block(&mut block, g(aa), g(bb), weights[q], l, m);
+                }
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let want = block[3 * i + j];
+                        assert!((a[(3 * aa + i) * n + 3 * bb + j] - want).abs() <= 1e-12 * want.abs().max(1.0));
+                    }
+                }
             }
         }
     }

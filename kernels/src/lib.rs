@@ -13,5 +13,8 @@
 //!   `[xx, yy, zz, xy, xz, yz]` with engineering shear strains (`2 e_xy`).
 
 pub mod elasticity;
+pub mod lanes;
+pub mod mean_value;
+pub mod quadrature;
 pub mod tet;
 pub mod vec3;

@@ -40,10 +40,6 @@ pub fn gradients(x: &[[f64; 3]; 4]) -> Option<(f64, [[f64; 3]; 4])> {
     let g1 = scale(c23, inv);
     let g2 = scale(cross(e3, e1), inv);
     let g3 = scale(cross(e1, e2), inv);
-    let g0 = [
-        -(g1[0] + g2[0] + g3[0]),
-        -(g1[1] + g2[1] + g3[1]),
-        -(g1[2] + g2[2] + g3[2]),
-    ];
+    let g0 = [-(g1[0] + g2[0] + g3[0]), -(g1[1] + g2[1] + g3[1]), -(g1[2] + g2[2] + g3[2])];
     Some((six_v / 6.0, [g0, g1, g2, g3]))
 }

@@ -14,10 +14,7 @@ pub struct Constraints {
 impl Constraints {
     /// No unknown fixed, for `n` scalar unknowns.
     pub fn free(n: usize) -> Self {
-        Constraints {
-            fixed: vec![false; n],
-            value: vec![0.0; n],
-        }
+        Constraints { fixed: vec![false; n], value: vec![0.0; n] }
     }
 
     /// Fixes scalar unknown `d` to `v`.

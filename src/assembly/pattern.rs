@@ -107,21 +107,10 @@ impl SparsePattern {
                 position(j as u32, j as u32) + c * col_stride[j] + c
             })
             .collect();
-        let colours = store
-            .batches
-            .iter()
-            .map(|b| colour(b.k, &b.nodes, num_blocks))
-            .collect();
+        let colours = store.batches.iter().map(|b| colour(b.k, &b.nodes, num_blocks)).collect();
         // SAFETY-free check of the structure happens inside faer.
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        SparsePattern {
-            num_blocks,
-            symbolic,
-            col_stride,
-            slots,
-            colours,
-            diagonal,
-        }
+        SparsePattern { num_blocks, symbolic, col_stride, slots, colours, diagonal }
     }
 
     /// Number of stored scalar entries.
@@ -236,7 +225,7 @@ mod tests {
     #[test]
     fn colouring_separates_elements_sharing_nodes() {
         let mesh = box_tet([0.0; 3], [1.0; 3], [3, 2, 2]).unwrap();
-        let store = ElementStore::build(&mesh, &Material::new(1.0, 0.3, 1.0).unwrap()).unwrap();
+        let store = ElementStore::build(&mesh, &Material::new(1.0, 0.3, 1.0).unwrap(), &Default::default()).unwrap();
         let b = &store.batches[0];
         let classes = colour(b.k, &b.nodes, mesh.nodes.len());
         assert_eq!(classes.iter().map(Vec::len).sum::<usize>(), b.len());

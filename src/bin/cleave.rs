@@ -55,22 +55,14 @@ fn set_threads(threads: Option<usize>) -> Result<(), String> {
         if n == 0 {
             return Err("--threads must be at least 1".into());
         }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .map_err(|e| e.to_string())?;
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| e.to_string())?;
     }
     Ok(())
 }
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
-        Command::Run {
-            scene,
-            out,
-            steps,
-            threads,
-        } => {
+        Command::Run { scene, out, steps, threads } => {
             set_threads(threads)?;
             let loaded = LoadedScene::load(&scene).map_err(|e| e.to_string())?;
             let opts = RunOptions { out, steps };

@@ -15,11 +15,7 @@ pub fn read_gmsh(path: &Path) -> Result<PolyMesh, IoError> {
     let msh = mshio::parse_msh_bytes(&bytes).map_err(|e| {
         let msg = e.to_string();
         let line = first_line_number(&msg).unwrap_or(1);
-        IoError::parse(
-            path,
-            line,
-            format!("not a valid gmsh 4.1 file: {}", msg.lines().next().unwrap_or("")),
-        )
+        IoError::parse(path, line, format!("not a valid gmsh 4.1 file: {}", msg.lines().next().unwrap_or("")))
     })?;
     let Some(node_sec) = msh.data.nodes else {
         return Err(IoError::unsupported(path, "no $Nodes section"));
@@ -36,10 +32,7 @@ pub fn read_gmsh(path: &Path) -> Result<PolyMesh, IoError> {
         for (i, nd) in block.nodes.iter().enumerate() {
             let p = [nd.x, nd.y, nd.z];
             if !p.iter().all(|x| x.is_finite()) {
-                return Err(IoError::unsupported(
-                    path,
-                    format!("node {} has a non-finite coordinate", start + i + 1),
-                ));
+                return Err(IoError::unsupported(path, format!("node {} has a non-finite coordinate", start + i + 1)));
             }
             nodes.push(p);
         }
@@ -52,9 +45,7 @@ pub fn read_gmsh(path: &Path) -> Result<PolyMesh, IoError> {
     let min_tag = node_sec.min_node_tag;
     let index = |tag: u64| -> Option<u32> {
         if dense {
-            tag.checked_sub(min_tag)
-                .filter(|&i| (i as usize) < nodes.len())
-                .map(|i| i as u32)
+            tag.checked_sub(min_tag).filter(|&i| (i as usize) < nodes.len()).map(|i| i as u32)
         } else {
             tag_of.get(&tag).copied()
         }
@@ -68,10 +59,7 @@ pub fn read_gmsh(path: &Path) -> Result<PolyMesh, IoError> {
                 ids.push(index(tag).ok_or_else(|| {
                     IoError::unsupported(
                         path,
-                        format!(
-                            "element {} refers to node tag {tag}, which does not exist",
-                            el.element_tag
-                        ),
+                        format!("element {} refers to node tag {tag}, which does not exist", el.element_tag),
                     )
                 })?);
             }
@@ -90,10 +78,7 @@ pub fn read_gmsh(path: &Path) -> Result<PolyMesh, IoError> {
         }
     }
     if cells.is_empty() {
-        return Err(IoError::unsupported(
-            path,
-            "no tetrahedra or hexahedra: not a volume mesh",
-        ));
+        return Err(IoError::unsupported(path, "no tetrahedra or hexahedra: not a volume mesh"));
     }
     PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))
 }
@@ -115,24 +100,15 @@ pub fn write_gmsh(path: &Path, nodes: &[[f64; 3]], cells: &[Cell]) -> Result<(),
         let _ = writeln!(s, "{:e} {:e} {:e}", p[0], p[1], p[2]);
     }
     s.push_str("$EndNodes\n$Elements\n");
-    let tets: Vec<_> = cells
-        .iter()
-        .filter_map(|c| if let Cell::Tet(t) = c { Some(t.to_vec()) } else { None })
-        .collect();
-    let hexes: Vec<_> = cells
-        .iter()
-        .filter_map(|c| if let Cell::Hex(h) = c { Some(h.to_vec()) } else { None })
-        .collect();
+    let tets: Vec<_> =
+        cells.iter().filter_map(|c| if let Cell::Tet(t) = c { Some(t.to_vec()) } else { None }).collect();
+    let hexes: Vec<_> =
+        cells.iter().filter_map(|c| if let Cell::Hex(h) = c { Some(h.to_vec()) } else { None }).collect();
     if tets.len() + hexes.len() != cells.len() {
-        return Err(IoError::unsupported(
-            path,
-            "gmsh output supports only tetrahedra and hexahedra",
-        ));
+        return Err(IoError::unsupported(path, "gmsh output supports only tetrahedra and hexahedra"));
     }
-    let blocks: Vec<(i32, &Vec<Vec<u32>>)> = [(4, &tets), (5, &hexes)]
-        .into_iter()
-        .filter(|(_, v)| !v.is_empty())
-        .collect();
+    let blocks: Vec<(i32, &Vec<Vec<u32>>)> =
+        [(4, &tets), (5, &hexes)].into_iter().filter(|(_, v)| !v.is_empty()).collect();
     let _ = writeln!(s, "{} {} 1 {}", blocks.len(), cells.len(), cells.len());
     let mut tag = 1;
     for (kind, list) in blocks {

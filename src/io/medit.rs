@@ -25,11 +25,7 @@ pub fn read_medit(path: &Path) -> Result<PolyMesh, IoError> {
             "dimension" => {
                 dim = t.usize("dimension")?;
                 if dim != 3 {
-                    return Err(IoError::parse(
-                        path,
-                        line,
-                        format!("dimension {dim} is not supported (expected 3)"),
-                    ));
+                    return Err(IoError::parse(path, line, format!("dimension {dim} is not supported (expected 3)")));
                 }
             }
             "vertices" => {
@@ -83,10 +79,7 @@ pub fn read_medit(path: &Path) -> Result<PolyMesh, IoError> {
         }
     }
     if cells.is_empty() {
-        return Err(IoError::unsupported(
-            path,
-            "no Tetrahedra or Hexahedra section: not a volume mesh",
-        ));
+        return Err(IoError::unsupported(path, "no Tetrahedra or Hexahedra section: not a volume mesh"));
     }
     PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))
 }
@@ -99,14 +92,8 @@ pub fn write_medit(path: &Path, nodes: &[[f64; 3]], cells: &[Cell]) -> Result<()
     for p in nodes {
         let _ = writeln!(s, "{:e} {:e} {:e} 1", p[0], p[1], p[2]);
     }
-    let tets: Vec<_> = cells
-        .iter()
-        .filter_map(|c| if let Cell::Tet(t) = c { Some(t) } else { None })
-        .collect();
-    let hexes: Vec<_> = cells
-        .iter()
-        .filter_map(|c| if let Cell::Hex(h) = c { Some(h) } else { None })
-        .collect();
+    let tets: Vec<_> = cells.iter().filter_map(|c| if let Cell::Tet(t) = c { Some(t) } else { None }).collect();
+    let hexes: Vec<_> = cells.iter().filter_map(|c| if let Cell::Hex(h) = c { Some(h) } else { None }).collect();
     if tets.len() + hexes.len() != cells.len() {
         return Err(IoError::unsupported(path, "Medit stores only tetrahedra and hexahedra"));
     }

@@ -37,11 +37,7 @@ pub enum IoError {
     Os { path: PathBuf, source: std::io::Error },
     /// The file's content does not follow its format.
     #[error("{}:{line}: {message}", .path.display())]
-    Parse {
-        path: PathBuf,
-        line: usize,
-        message: String,
-    },
+    Parse { path: PathBuf, line: usize, message: String },
     /// The file is valid but uses something cleave does not read.
     #[error("{}: {message}", .path.display())]
     Unsupported { path: PathBuf, message: String },
@@ -52,29 +48,16 @@ pub enum IoError {
 
 impl IoError {
     pub(crate) fn os(path: &Path, source: std::io::Error) -> Self {
-        IoError::Os {
-            path: path.to_path_buf(),
-            source,
-        }
+        IoError::Os { path: path.to_path_buf(), source }
     }
     pub(crate) fn parse(path: &Path, line: usize, message: impl Into<String>) -> Self {
-        IoError::Parse {
-            path: path.to_path_buf(),
-            line,
-            message: message.into(),
-        }
+        IoError::Parse { path: path.to_path_buf(), line, message: message.into() }
     }
     pub(crate) fn unsupported(path: &Path, message: impl Into<String>) -> Self {
-        IoError::Unsupported {
-            path: path.to_path_buf(),
-            message: message.into(),
-        }
+        IoError::Unsupported { path: path.to_path_buf(), message: message.into() }
     }
     pub(crate) fn mesh(path: &Path, source: MeshError) -> Self {
-        IoError::Mesh {
-            path: path.to_path_buf(),
-            source,
-        }
+        IoError::Mesh { path: path.to_path_buf(), source }
     }
 }
 
@@ -82,11 +65,7 @@ impl IoError {
 /// `.vtu`, `.node`, `.ele`). The mesh is built and oriented but not
 /// validated: call [`PolyMesh::validate`].
 pub fn read_mesh(path: &Path) -> Result<PolyMesh, IoError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
         "mesh" => read_medit(path),
         "msh" => read_gmsh(path),

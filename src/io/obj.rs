@@ -17,16 +17,11 @@ pub struct Surface {
 
 /// Reads an OBJ surface (polygons are triangulated; groups are merged).
 pub fn read_obj_surface(path: &Path) -> Result<Surface, IoError> {
-    let opts = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ..Default::default()
-    };
+    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, _) = tobj::load_obj(path, &opts).map_err(|e| match e {
-        tobj::LoadError::OpenFileFailed => IoError::os(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "cannot open file"),
-        ),
+        tobj::LoadError::OpenFileFailed => {
+            IoError::os(path, std::io::Error::new(std::io::ErrorKind::NotFound, "cannot open file"))
+        }
         other => IoError::parse(path, 0, format!("not a valid OBJ file: {other}")),
     })?;
     let mut s = Surface::default();
@@ -65,11 +60,7 @@ pub fn write_boundary_obj(path: &Path, mesh: &PolyMesh, positions: &[[f64; 3]]) 
             continue;
         }
         let e = adj.face_elements[f][0] as usize;
-        let outward = mesh.elements[e]
-            .faces
-            .iter()
-            .find(|r| r.face as usize == f)
-            .is_some_and(|r| r.outward);
+        let outward = mesh.elements[e].faces.iter().find(|r| r.face as usize == f).is_some_and(|r| r.outward);
         for t in &face.triangles {
             let t = if outward { *t } else { [t[0], t[2], t[1]] };
             let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);

@@ -41,9 +41,7 @@ pub fn read_tetgen(path: &Path) -> Result<PolyMesh, IoError> {
     let m = t.usize("tetrahedron count")?;
     let per = t.usize("nodes per tetrahedron")?;
     if per != 4 && per != 10 {
-        return Err(t.error(format!(
-            "{per} nodes per tetrahedron is not supported (expected 4 or 10)"
-        )));
+        return Err(t.error(format!("{per} nodes per tetrahedron is not supported (expected 4 or 10)")));
     }
     let attrs = t.usize("region attribute flag")?;
     let mut cells = Vec::with_capacity(m);

@@ -44,11 +44,7 @@ impl<'a> Tokens<'a> {
                 self.pos += 1;
                 Ok(t.1)
             }
-            None => Err(IoError::parse(
-                self.path,
-                self.line(),
-                format!("unexpected end of file, expected {what}"),
-            )),
+            None => Err(IoError::parse(self.path, self.line(), format!("unexpected end of file, expected {what}"))),
         }
     }
 
@@ -56,11 +52,7 @@ impl<'a> Tokens<'a> {
         let line = self.line();
         let t = self.next(what)?;
         t.parse().map_err(|_| {
-            IoError::parse(
-                self.path,
-                line,
-                format!("expected {what} (a non-negative integer), found '{t}'"),
-            )
+            IoError::parse(self.path, line, format!("expected {what} (a non-negative integer), found '{t}'"))
         })
     }
 

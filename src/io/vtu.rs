@@ -43,15 +43,9 @@ fn b64<T: bytemuck::Pod>(data: &[T]) -> String {
 fn data_array(s: &mut String, ty: &str, name: &str, comps: usize, payload: String) {
     // scalar arrays carry no NumberOfComponents, as VTK writes them (meshio
     // would otherwise read them as n x 1 tables)
-    let comps = if comps == 1 {
-        String::new()
-    } else {
-        format!(" NumberOfComponents=\"{comps}\"")
-    };
-    let _ = writeln!(
-        s,
-        "        <DataArray type=\"{ty}\" Name=\"{name}\"{comps} format=\"binary\">{payload}</DataArray>"
-    );
+    let comps = if comps == 1 { String::new() } else { format!(" NumberOfComponents=\"{comps}\"") };
+    let _ =
+        writeln!(s, "        <DataArray type=\"{ty}\" Name=\"{name}\"{comps} format=\"binary\">{payload}</DataArray>");
 }
 
 /// Writes `mesh` with node positions `points` (m; pass the rest positions or
@@ -62,10 +56,7 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
     let mut types: Vec<u8> = Vec::with_capacity(mesh.elements.len());
     let mut faces: Vec<i64> = Vec::new();
     let mut faceoffsets: Vec<i64> = Vec::with_capacity(mesh.elements.len());
-    let all_tets = mesh
-        .elements
-        .iter()
-        .all(|el| el.nodes.len() == 4 && el.faces.len() == 4);
+    let all_tets = mesh.elements.iter().all(|el| el.nodes.len() == 4 && el.faces.len() == 4);
     for el in &mesh.elements {
         if all_tets {
             let v = &el.nodes;
@@ -98,12 +89,7 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
         "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n",
     );
     s.push_str("  <UnstructuredGrid>\n");
-    let _ = writeln!(
-        s,
-        "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
-        points.len(),
-        mesh.elements.len()
-    );
+    let _ = writeln!(s, "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">", points.len(), mesh.elements.len());
     s.push_str("      <PointData>\n");
     for (name, v) in &fields.point_vectors {
         let flat: Vec<f64> = v.iter().flatten().copied().collect();
@@ -140,13 +126,8 @@ struct Array {
 /// Reads the cells of a `.vtu` file as a mesh.
 pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let text = read_text(path)?;
-    let line_at = |pos: u64| {
-        text.as_bytes()[..(pos as usize).min(text.len())]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count()
-            + 1
-    };
+    let line_at =
+        |pos: u64| text.as_bytes()[..(pos as usize).min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1;
     let mut reader = quick_xml::Reader::from_str(&text);
     let mut header64 = false;
     let mut section = String::new();
@@ -156,9 +137,7 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let mut cell_arrays: Vec<Array> = Vec::new();
     loop {
         let pos = reader.buffer_position();
-        let ev = reader
-            .read_event()
-            .map_err(|e| IoError::parse(path, line_at(pos), format!("malformed XML: {e}")))?;
+        let ev = reader.read_event().map_err(|e| IoError::parse(path, line_at(pos), format!("malformed XML: {e}")))?;
         match ev {
             Event::Start(e) | Event::Empty(e) => {
                 let tag = String::from_utf8_lossy(e.name().as_ref()).into_owned();
@@ -204,10 +183,7 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                 }
             }
             Event::Text(t) if current.is_some() => {
-                body.push_str(
-                    &t.decode()
-                        .map_err(|e| IoError::parse(path, line_at(pos), e.to_string()))?,
-                );
+                body.push_str(&t.decode().map_err(|e| IoError::parse(path, line_at(pos), e.to_string()))?);
             }
             Event::End(e) if e.name().as_ref() == b"DataArray" => {
                 if let Some((name, ty, format, line)) = current.take() {
@@ -226,11 +202,7 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     }
     let points = points.ok_or_else(|| IoError::unsupported(path, "no <Points> array"))?;
     if points.values.len() % 3 != 0 {
-        return Err(IoError::parse(
-            path,
-            points.line,
-            "the Points array length is not a multiple of 3",
-        ));
+        return Err(IoError::parse(path, points.line, "the Points array length is not a multiple of 3"));
     }
     let nodes: Vec<[f64; 3]> = points.values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let get = |n: &str| cell_arrays.iter().find(|a| a.name == n);
@@ -239,11 +211,7 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let types = get("types").ok_or_else(|| IoError::unsupported(path, "no Cells/types array"))?;
     let as_index = |arr: &Array, v: f64| -> Result<usize, IoError> {
         if v < 0.0 || v.fract() != 0.0 {
-            return Err(IoError::parse(
-                path,
-                arr.line,
-                format!("'{}' holds {v}, not an index", arr.name),
-            ));
+            return Err(IoError::parse(path, arr.line, format!("'{}' holds {v}, not an index", arr.name)));
         }
         Ok(v as usize)
     };
@@ -254,17 +222,10 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     for (c, &ty) in types.values.iter().enumerate() {
         let end = as_index(
             offs,
-            *offs
-                .values
-                .get(c)
-                .ok_or_else(|| IoError::parse(path, offs.line, "fewer offsets than cells"))?,
+            *offs.values.get(c).ok_or_else(|| IoError::parse(path, offs.line, "fewer offsets than cells"))?,
         )?;
         if end < start || end > conn.values.len() {
-            return Err(IoError::parse(
-                path,
-                offs.line,
-                format!("offset of cell {c} is out of range"),
-            ));
+            return Err(IoError::parse(path, offs.line, format!("offset of cell {c} is out of range")));
         }
         let ids: Vec<u32> = conn.values[start..end]
             .iter()
@@ -286,23 +247,12 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
             VTK_HEXAHEDRON if ids.len() == 8 => cells.push(Cell::Hex(std::array::from_fn(|i| ids[i]))),
             VTK_POLYHEDRON => {
                 let (Some(faces), Some(fo)) = (faces, faceoffs) else {
-                    return Err(IoError::unsupported(
-                        path,
-                        "polyhedron cells need 'faces' and 'faceoffsets' arrays",
-                    ));
+                    return Err(IoError::unsupported(path, "polyhedron cells need 'faces' and 'faceoffsets' arrays"));
                 };
                 let end = as_index(fo, fo.values[c])?;
-                let prev = (0..c)
-                    .rev()
-                    .map(|k| fo.values[k])
-                    .find(|&v| v >= 0.0)
-                    .map_or(Ok(0), |v| as_index(fo, v))?;
+                let prev = (0..c).rev().map(|k| fo.values[k]).find(|&v| v >= 0.0).map_or(Ok(0), |v| as_index(fo, v))?;
                 if end > faces.values.len() || prev > end {
-                    return Err(IoError::parse(
-                        path,
-                        fo.line,
-                        format!("faceoffsets of cell {c} out of range"),
-                    ));
+                    return Err(IoError::parse(path, fo.line, format!("faceoffsets of cell {c} out of range")));
                 }
                 let stream = &faces.values[prev..end];
                 let mut loops = Vec::new();
@@ -311,16 +261,10 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                 for _ in 0..nf {
                     let n = stream.get(k).map_or(Ok(0), |&v| as_index(faces, v))?;
                     let Some(lp) = stream.get(k + 1..k + 1 + n) else {
-                        return Err(IoError::parse(
-                            path,
-                            faces.line,
-                            format!("face stream of cell {c} is truncated"),
-                        ));
+                        return Err(IoError::parse(path, faces.line, format!("face stream of cell {c} is truncated")));
                     };
-                    let lp: Vec<u32> = lp
-                        .iter()
-                        .map(|&v| as_index(faces, v).map(|i| i as u32))
-                        .collect::<Result<_, _>>()?;
+                    let lp: Vec<u32> =
+                        lp.iter().map(|&v| as_index(faces, v).map(|i| i as u32)).collect::<Result<_, _>>()?;
                     if let Some(&bad) = lp.iter().find(|&&i| i as usize >= nodes.len()) {
                         return Err(IoError::parse(
                             path,
@@ -378,9 +322,8 @@ fn decode_array(
             } else {
                 u32::from_le_bytes(raw[..4].try_into().unwrap()) as usize
             };
-            let data = raw
-                .get(hlen..hlen + n)
-                .ok_or_else(|| IoError::parse(path, line, "binary array is truncated"))?;
+            let data =
+                raw.get(hlen..hlen + n).ok_or_else(|| IoError::parse(path, line, "binary array is truncated"))?;
             let size = match ty {
                 "Float64" | "Int64" | "UInt64" => 8,
                 "Float32" | "Int32" | "UInt32" => 4,
@@ -409,17 +352,10 @@ fn decode_array(
                 })
                 .collect();
             if let Some(bad) = vals.iter().position(|v| !v.is_finite()) {
-                return Err(IoError::parse(
-                    path,
-                    line,
-                    format!("value {bad} of the array is not finite"),
-                ));
+                return Err(IoError::parse(path, line, format!("value {bad} of the array is not finite")));
             }
             Ok(vals)
         }
-        other => Err(IoError::unsupported(
-            path,
-            format!("line {line}: DataArray format '{other}' is not supported"),
-        )),
+        other => Err(IoError::unsupported(path, format!("line {line}: DataArray format '{other}' is not supported"))),
     }
 }

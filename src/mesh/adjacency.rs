@@ -60,12 +60,7 @@ impl Adjacency {
                 edge_faces.entry((a.min(b), a.max(b))).or_default().push(f as u32);
             }
         }
-        Adjacency {
-            face_elements,
-            node_element_offsets: counts,
-            node_element_ids: ids,
-            edge_faces,
-        }
+        Adjacency { face_elements, node_element_offsets: counts, node_element_ids: ids, edge_faces }
     }
 
     /// Elements touching node `n`.

@@ -35,11 +35,7 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
         area_vec = add(area_vec, t);
     }
     let len = norm(area_vec);
-    let normal = if len > 0.0 {
-        scale(area_vec, 1.0 / len)
-    } else {
-        [0.0; 3]
-    };
+    let normal = if len > 0.0 { scale(area_vec, 1.0 / len) } else { [0.0; 3] };
     for i in 0..n {
         let (a, b) = (p(i), p(i + 1));
         let w = dot(cross(sub(a, mean), sub(b, mean)), normal);
@@ -56,13 +52,7 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
             d2 = d2.max(dot(d, d));
         }
     }
-    FaceGeometry {
-        normal,
-        area: 0.5 * len,
-        centroid,
-        max_deviation,
-        diameter: d2.sqrt(),
-    }
+    FaceGeometry { normal, area: 0.5 * len, centroid, max_deviation, diameter: d2.sqrt() }
 }
 
 #[cfg(test)]
@@ -82,14 +72,8 @@ mod tests {
     #[test]
     fn l_shape_centroid() {
         // L made of three unit squares: centroid (5/6, 5/6)
-        let nodes = [
-            [0.0, 0.0, 0.0],
-            [2.0, 0.0, 0.0],
-            [2.0, 1.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [1.0, 2.0, 0.0],
-            [0.0, 2.0, 0.0],
-        ];
+        let nodes =
+            [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 2.0, 0.0]];
         let g = face_geometry(&nodes, &[0, 1, 2, 3, 4, 5]);
         assert!((g.area - 3.0).abs() < 1e-14);
         assert!((g.centroid[0] - 5.0 / 6.0).abs() < 1e-14);

@@ -66,23 +66,13 @@ impl Cell {
     /// The face loops of the cell in its own numbering.
     pub fn face_loops(&self) -> Vec<Vec<u32>> {
         match self {
-            Cell::Tet(t) => vec![
-                vec![t[0], t[2], t[1]],
-                vec![t[0], t[1], t[3]],
-                vec![t[1], t[2], t[3]],
-                vec![t[0], t[3], t[2]],
-            ],
-            Cell::Hex(h) => [
-                [0, 3, 2, 1],
-                [4, 5, 6, 7],
-                [0, 1, 5, 4],
-                [1, 2, 6, 5],
-                [2, 3, 7, 6],
-                [3, 0, 4, 7],
-            ]
-            .iter()
-            .map(|f| f.iter().map(|&i| h[i]).collect())
-            .collect(),
+            Cell::Tet(t) => {
+                vec![vec![t[0], t[2], t[1]], vec![t[0], t[1], t[3]], vec![t[1], t[2], t[3]], vec![t[0], t[3], t[2]]]
+            }
+            Cell::Hex(h) => [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+                .iter()
+                .map(|f| f.iter().map(|&i| h[i]).collect())
+                .collect(),
             Cell::Polyhedron(faces) => faces.clone(),
         }
     }
@@ -116,16 +106,9 @@ impl PolyMesh {
     pub fn from_cells(nodes: Vec<[f64; 3]>, cells: &[Cell]) -> Result<Self, MeshError> {
         let n = nodes.len();
         if let Some(node) = nodes.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
-            return Err(MeshError::NonFiniteNode {
-                node,
-                position: nodes[node],
-            });
+            return Err(MeshError::NonFiniteNode { node, position: nodes[node] });
         }
-        let mut mesh = PolyMesh {
-            nodes,
-            faces: Vec::new(),
-            elements: Vec::with_capacity(cells.len()),
-        };
+        let mut mesh = PolyMesh { nodes, faces: Vec::new(), elements: Vec::with_capacity(cells.len()) };
         let mut by_key: HashMap<Vec<u32>, u32> = HashMap::new();
         let mut users: Vec<u8> = Vec::new();
         for (e, cell) in cells.iter().enumerate() {
@@ -133,11 +116,7 @@ impl PolyMesh {
             let mut refs = Vec::with_capacity(loops.len());
             for lp in loops {
                 if let Some(&bad) = lp.iter().find(|&&v| v as usize >= n) {
-                    return Err(MeshError::NodeIndexOutOfRange {
-                        element: e,
-                        index: bad as usize,
-                        nodes: n,
-                    });
+                    return Err(MeshError::NodeIndexOutOfRange { element: e, index: bad as usize, nodes: n });
                 }
                 let key = face_key(&lp);
                 let distinct = {
@@ -146,35 +125,23 @@ impl PolyMesh {
                     d.len()
                 };
                 if distinct < 3 || distinct != lp.len() {
-                    return Err(MeshError::DegenerateFace {
-                        element: e,
-                        vertices: lp,
-                    });
+                    return Err(MeshError::DegenerateFace { element: e, vertices: lp });
                 }
                 let next = mesh.faces.len() as u32;
                 let f = *by_key.entry(key).or_insert(next);
                 if f == next {
-                    mesh.faces.push(Face {
-                        vertices: lp.clone(),
-                        triangles: Vec::new(),
-                    });
+                    mesh.faces.push(Face { vertices: lp.clone(), triangles: Vec::new() });
                     users.push(0);
                 }
                 users[f as usize] += 1;
                 if users[f as usize] > 2 {
-                    return Err(MeshError::FaceSharedByMoreThanTwo {
-                        face: f as usize,
-                        element: e,
-                    });
+                    return Err(MeshError::FaceSharedByMoreThanTwo { face: f as usize, element: e });
                 }
                 // Same cyclic direction as the stored loop?
                 let same = same_direction(&mesh.faces[f as usize].vertices, &lp);
                 refs.push(FaceRef { face: f, outward: same });
             }
-            mesh.elements.push(Element {
-                faces: refs,
-                nodes: Vec::new(),
-            });
+            mesh.elements.push(Element { faces: refs, nodes: Vec::new() });
         }
         for e in 0..mesh.elements.len() {
             mesh.refresh_element_nodes(e);
@@ -196,11 +163,8 @@ impl PolyMesh {
 
     /// Recomputes the sorted node list of element `e` from its faces.
     pub(crate) fn refresh_element_nodes(&mut self, e: usize) {
-        let mut nodes: Vec<u32> = self.elements[e]
-            .faces
-            .iter()
-            .flat_map(|r| self.faces[r.face as usize].vertices.iter().copied())
-            .collect();
+        let mut nodes: Vec<u32> =
+            self.elements[e].faces.iter().flat_map(|r| self.faces[r.face as usize].vertices.iter().copied()).collect();
         nodes.sort_unstable();
         nodes.dedup();
         self.elements[e].nodes = nodes;
@@ -223,10 +187,7 @@ impl PolyMesh {
     pub fn element_triangles(&self, e: usize) -> impl Iterator<Item = [u32; 3]> + '_ {
         self.elements[e].faces.iter().flat_map(move |r| {
             let out = r.outward;
-            self.faces[r.face as usize]
-                .triangles
-                .iter()
-                .map(move |t| if out { *t } else { [t[0], t[2], t[1]] })
+            self.faces[r.face as usize].triangles.iter().map(move |t| if out { *t } else { [t[0], t[2], t[1]] })
         })
     }
 
@@ -252,11 +213,7 @@ impl PolyMesh {
         let mut v = 0.0;
         let mut c = [0.0; 3];
         for t in self.element_triangles(e) {
-            let (a, b, d) = (
-                self.nodes[t[0] as usize],
-                self.nodes[t[1] as usize],
-                self.nodes[t[2] as usize],
-            );
+            let (a, b, d) = (self.nodes[t[0] as usize], self.nodes[t[1] as usize], self.nodes[t[2] as usize]);
             let vt = cleave_kernels::tet::signed_volume(origin, a, b, d);
             v += vt;
             c = add(c, scale(add(add(origin, a), add(b, d)), vt / 4.0));
@@ -388,20 +345,11 @@ mod tests {
 
     #[test]
     fn two_tets_share_one_face() {
-        let nodes = vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [1.0, 1.0, 1.0],
-        ];
+        let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]];
         let m = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([1, 2, 3, 4])]).unwrap();
         assert_eq!(m.faces.len(), 7);
-        let shared: Vec<_> = m.elements[0]
-            .faces
-            .iter()
-            .filter(|r| m.elements[1].faces.iter().any(|s| s.face == r.face))
-            .collect();
+        let shared: Vec<_> =
+            m.elements[0].faces.iter().filter(|r| m.elements[1].faces.iter().any(|s| s.face == r.face)).collect();
         assert_eq!(shared.len(), 1);
         let other = m.elements[1].faces.iter().find(|s| s.face == shared[0].face).unwrap();
         assert_ne!(shared[0].outward, other.outward);

@@ -19,11 +19,7 @@ pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> Vec<[u32; 3]> {
     let normal = face_geometry(nodes, vertices).normal;
     // 2D coordinates in the face plane.
     let u = {
-        let a = if normal[0].abs() < 0.9 {
-            [1.0, 0.0, 0.0]
-        } else {
-            [0.0, 1.0, 0.0]
-        };
+        let a = if normal[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
         let c = cross(normal, a);
         let l = norm(c);
         [c[0] / l, c[1] / l, c[2] / l]
@@ -69,11 +65,7 @@ pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> Vec<[u32; 3]> {
         }
         let k = best.or(fallback).map(|(k, _)| k).unwrap_or(0);
         let m = ring.len();
-        out.push([
-            vertices[ring[(k + m - 1) % m]],
-            vertices[ring[k]],
-            vertices[ring[(k + 1) % m]],
-        ]);
+        out.push([vertices[ring[(k + m - 1) % m]], vertices[ring[k]], vertices[ring[(k + 1) % m]]]);
         ring.remove(k);
     }
     out.push([vertices[ring[0]], vertices[ring[1]], vertices[ring[2]]]);
@@ -114,13 +106,7 @@ mod tests {
 
     #[test]
     fn square_with_collinear_vertex() {
-        let nodes = [
-            [0.0, 0.0, 0.0],
-            [0.5, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [0.0, 1.0, 0.0],
-        ];
+        let nodes = [[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
         let t = triangulate_loop(&nodes, &[0, 1, 2, 3, 4]);
         assert_eq!(t.len(), 3);
         assert!((area(&nodes, &t) - 1.0).abs() < 1e-15);
@@ -132,14 +118,8 @@ mod tests {
 
     #[test]
     fn non_convex_l() {
-        let nodes = [
-            [0.0, 0.0, 0.0],
-            [2.0, 0.0, 0.0],
-            [2.0, 1.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [1.0, 2.0, 0.0],
-            [0.0, 2.0, 0.0],
-        ];
+        let nodes =
+            [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 2.0, 0.0]];
         let t = triangulate_loop(&nodes, &[0, 1, 2, 3, 4, 5]);
         assert_eq!(t.len(), 4);
         assert!((area(&nodes, &t) - 3.0).abs() < 1e-14);

@@ -19,11 +19,7 @@ pub enum MeshError {
     Empty,
     /// A box generator was given an empty box or zero cells.
     #[error("a generated box needs min < max on every axis and at least one cell per axis (min {min:?}, max {max:?}, cells {cells:?})")]
-    InvalidBox {
-        min: [f64; 3],
-        max: [f64; 3],
-        cells: [usize; 3],
-    },
+    InvalidBox { min: [f64; 3], max: [f64; 3], cells: [usize; 3] },
     /// A node coordinate is NaN or infinite.
     #[error("node {node} has a non-finite coordinate {position:?}")]
     NonFiniteNode { node: usize, position: [f64; 3] },
@@ -41,18 +37,10 @@ pub enum MeshError {
     ZeroAreaFace { face: usize },
     /// A face's vertices are not in one plane.
     #[error("face {face} is not planar: a vertex is {deviation:.3e} m off its plane, more than {tolerance:.1e} of the face size")]
-    NonPlanarFace {
-        face: usize,
-        deviation: f64,
-        tolerance: f64,
-    },
+    NonPlanarFace { face: usize, deviation: f64, tolerance: f64 },
     /// An element's boundary is not closed.
     #[error("element {element} is not closed: edge ({}, {}) is used by {count} of its faces instead of 2", .edge.0, .edge.1)]
-    OpenElement {
-        element: usize,
-        edge: (u32, u32),
-        count: usize,
-    },
+    OpenElement { element: usize, edge: (u32, u32), count: usize },
     /// Two faces of an element traverse a shared edge in the same direction.
     #[error("element {element} has inconsistently oriented faces along edge ({}, {}) (fix with PolyMesh::orient)", .edge.0, .edge.1)]
     InconsistentOrientation { element: usize, edge: (u32, u32) },
@@ -88,10 +76,7 @@ pub struct ValidationOptions {
 
 impl Default for ValidationOptions {
     fn default() -> Self {
-        ValidationOptions {
-            planarity: 1e-3,
-            duplicate: 1e-9,
-        }
+        ValidationOptions { planarity: 1e-3, duplicate: 1e-9 }
     }
 }
 
@@ -139,36 +124,22 @@ impl PolyMesh {
                 }
                 users[r.face as usize] += 1;
                 if users[r.face as usize] == 3 {
-                    push!(MeshError::FaceSharedByMoreThanTwo {
-                        face: r.face as usize,
-                        element: e
-                    });
+                    push!(MeshError::FaceSharedByMoreThanTwo { face: r.face as usize, element: e });
                 }
             }
         }
         for (f, face) in self.faces.iter().enumerate() {
             if let Some(&bad) = face.vertices.iter().find(|&&v| v as usize >= self.nodes.len()) {
-                let element = self
-                    .elements
-                    .iter()
-                    .position(|el| el.faces.iter().any(|r| r.face as usize == f))
-                    .unwrap_or(0);
-                push!(MeshError::NodeIndexOutOfRange {
-                    element,
-                    index: bad as usize,
-                    nodes: self.nodes.len()
-                });
+                let element =
+                    self.elements.iter().position(|el| el.faces.iter().any(|r| r.face as usize == f)).unwrap_or(0);
+                push!(MeshError::NodeIndexOutOfRange { element, index: bad as usize, nodes: self.nodes.len() });
                 continue;
             }
             let g = face_geometry(&self.nodes, &face.vertices);
             if g.area <= 1e-14 * g.diameter * g.diameter || g.area == 0.0 {
                 push!(MeshError::ZeroAreaFace { face: f });
             } else if g.max_deviation > opts.planarity * g.diameter {
-                push!(MeshError::NonPlanarFace {
-                    face: f,
-                    deviation: g.max_deviation,
-                    tolerance: opts.planarity
-                });
+                push!(MeshError::NonPlanarFace { face: f, deviation: g.max_deviation, tolerance: opts.planarity });
             }
         }
         for e in 0..self.elements.len() {
@@ -192,11 +163,7 @@ impl PolyMesh {
                 match *slot {
                     None => *slot = Some((e, r.outward)),
                     Some((a, out)) if out == r.outward => {
-                        push!(MeshError::OverlappingElements {
-                            face: r.face as usize,
-                            a,
-                            b: e
-                        })
+                        push!(MeshError::OverlappingElements { face: r.face as usize, a, b: e })
                     }
                     _ => {}
                 }
@@ -228,11 +195,7 @@ impl PolyMesh {
         edges.sort_unstable_by_key(|(k, _)| *k);
         for (edge, (count, balance)) in edges {
             if count != 2 {
-                return Err(MeshError::OpenElement {
-                    element: e,
-                    edge,
-                    count,
-                });
+                return Err(MeshError::OpenElement { element: e, edge, count });
             }
             if balance != 0 {
                 return Err(MeshError::InconsistentOrientation { element: e, edge });
@@ -255,11 +218,7 @@ impl PolyMesh {
                 match owner[r.face as usize] {
                     None => owner[r.face as usize] = Some((e, r.outward)),
                     Some((a, out)) if out == r.outward => {
-                        return Err(MeshError::OverlappingElements {
-                            face: r.face as usize,
-                            a,
-                            b: e,
-                        })
+                        return Err(MeshError::OverlappingElements { face: r.face as usize, a, b: e })
                     }
                     _ => {}
                 }
@@ -283,11 +242,7 @@ impl PolyMesh {
         sorted.sort_unstable_by_key(|(k, _)| **k);
         for (edge, fs) in &sorted {
             if fs.len() != 2 {
-                return Err(MeshError::OpenElement {
-                    element: e,
-                    edge: **edge,
-                    count: fs.len(),
-                });
+                return Err(MeshError::OpenElement { element: e, edge: **edge, count: fs.len() });
             }
         }
         // Breadth-first flip propagation: neighbours must traverse the shared
@@ -321,10 +276,7 @@ impl PolyMesh {
                             queue.push(other);
                         }
                         Some(f) if f != want_flip_other => {
-                            return Err(MeshError::InconsistentOrientation {
-                                element: e,
-                                edge: (a.min(b), a.max(b)),
-                            });
+                            return Err(MeshError::InconsistentOrientation { element: e, edge: (a.min(b), a.max(b)) });
                         }
                         _ => {}
                     }
@@ -448,9 +400,7 @@ impl PolyMesh {
             .into_iter()
             .map(|c| match c {
                 Cell::Polyhedron(fs) => Cell::Polyhedron(
-                    fs.into_iter()
-                        .map(|lp| lp.into_iter().map(|v| new_id[v as usize]).collect())
-                        .collect(),
+                    fs.into_iter().map(|lp| lp.into_iter().map(|v| new_id[v as usize]).collect()).collect(),
                 ),
                 other => other,
             })
@@ -480,10 +430,7 @@ mod tests {
         ];
         let mut m = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3]), Cell::Tet([4, 5, 6, 7])]).unwrap();
         assert_eq!(m.faces.len(), 8);
-        assert!(matches!(
-            m.validate(),
-            Err(MeshError::DuplicateNodes { a: 1, b: 4, .. })
-        ));
+        assert!(matches!(m.validate(), Err(MeshError::DuplicateNodes { a: 1, b: 4, .. })));
         let map = m.weld(1e-9).unwrap();
         assert_eq!(map[4], 1);
         assert_eq!(m.nodes.len(), 5);

@@ -10,11 +10,7 @@ fn grid(min: [f64; 3], max: [f64; 3], cells: [usize; 3]) -> (Vec<[f64; 3]>, impl
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let t = [
-                    i as f64 / cells[0] as f64,
-                    j as f64 / cells[1] as f64,
-                    k as f64 / cells[2] as f64,
-                ];
+                let t = [i as f64 / cells[0] as f64, j as f64 / cells[1] as f64, k as f64 / cells[2] as f64];
                 nodes.push([0, 1, 2].map(|d| min[d] + t[d] * (max[d] - min[d])));
             }
         }

@@ -61,10 +61,7 @@ impl MeanMax {
         if n == 0 {
             return MeanMax::default();
         }
-        MeanMax {
-            mean: sum / n as f64,
-            max,
-        }
+        MeanMax { mean: sum / n as f64, max }
     }
 }
 

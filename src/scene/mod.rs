@@ -22,28 +22,13 @@ pub enum SceneError {
     Read { path: PathBuf, source: std::io::Error },
     /// The TOML is malformed, has an unknown key or a value of the wrong type.
     #[error("{}:{line}: {message}", .path.display())]
-    Parse {
-        path: PathBuf,
-        line: usize,
-        message: String,
-    },
+    Parse { path: PathBuf, line: usize, message: String },
     /// A value is out of its allowed range.
     #[error("{}:{line}: {key} = {value}: {allowed}", .path.display())]
-    Invalid {
-        path: PathBuf,
-        line: usize,
-        key: String,
-        value: String,
-        allowed: String,
-    },
+    Invalid { path: PathBuf, line: usize, key: String, value: String, allowed: String },
     /// A valid key asks for something this build does not do yet.
     #[error("{}:{line}: {key}: {message}", .path.display())]
-    Unsupported {
-        path: PathBuf,
-        line: usize,
-        key: String,
-        message: String,
-    },
+    Unsupported { path: PathBuf, line: usize, key: String, message: String },
 }
 
 /// A parsed scene with the file it came from.
@@ -60,10 +45,8 @@ pub struct LoadedScene {
 impl LoadedScene {
     /// Reads, parses and range-checks a scene file.
     pub fn load(path: &Path) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|source| SceneError::Read { path: path.to_path_buf(), source })?;
         Self::parse(path, text)
     }
 
@@ -72,17 +55,9 @@ impl LoadedScene {
     pub fn parse(path: &Path, text: String) -> Result<Self, SceneError> {
         let scene: Scene = toml::from_str(&text).map_err(|e| {
             let line = e.span().map_or(1, |s| line_of_offset(&text, s.start));
-            SceneError::Parse {
-                path: path.to_path_buf(),
-                line,
-                message: e.message().trim().to_string(),
-            }
+            SceneError::Parse { path: path.to_path_buf(), line, message: e.message().trim().to_string() }
         })?;
-        let loaded = LoadedScene {
-            path: path.to_path_buf(),
-            text,
-            scene,
-        };
+        let loaded = LoadedScene { path: path.to_path_buf(), text, scene };
         loaded.scene.check(&loaded)?;
         Ok(loaded)
     }
@@ -125,11 +100,7 @@ impl LoadedScene {
 }
 
 fn line_of_offset(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
-        + 1
+    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
 /// Finds the line of a dotted key: `section[.index].name`.

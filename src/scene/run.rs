@@ -3,12 +3,13 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use super::{BoxElement, Generator, LoadedScene, Mode};
+use super::{BoxElement, Generator, LoadedScene, Mode, Quadrature};
 use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_tet, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{FixedRegion, Simulation, SimulationParams};
+use crate::store::{BasisOptions, QuadratureRule};
 use crate::Error;
 
 /// Command-line overrides of a scene.
@@ -35,9 +36,7 @@ impl LoadedScene {
             (Some(Generator::Box), Some(BoxElement::RandomConvex)) => {
                 random_convex(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(1))
             }
-            _ => Err(self
-                .invalid("mesh", "…", "needs mesh.file or a generator with an element kind")
-                .into()),
+            _ => Err(self.invalid("mesh", "…", "needs mesh.file or a generator with an element kind").into()),
         }
     }
 
@@ -57,10 +56,12 @@ impl LoadedScene {
     pub fn build_simulation(&self) -> Result<Simulation, Error> {
         let mesh = self.build_mesh()?;
         let s = &self.scene;
-        let params = SimulationParams {
-            material: s.material(),
-            gravity: s.simulation.gravity,
+        let quadrature = match s.basis.quadrature {
+            Quadrature::Consistent => QuadratureRule::Consistent,
+            Quadrature::Paper => QuadratureRule::Paper,
         };
+        let basis = BasisOptions { quadrature };
+        let params = SimulationParams { material: s.material(), gravity: s.simulation.gravity, basis };
         let mut sim = Simulation::new(mesh, params)?;
         for f in &s.fixed {
             sim.fix(FixedRegion {
@@ -90,9 +91,7 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
             1
         }
         Mode::Dynamic => {
-            return Err(scene
-                .unsupported("simulation.mode", "dynamic simulation is not implemented yet")
-                .into())
+            return Err(scene.unsupported("simulation.mode", "dynamic simulation is not implemented yet").into())
         }
     };
     let t = Instant::now();
@@ -101,11 +100,8 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
     sim.record_output_time(t.elapsed().as_secs_f64());
     let adjacency = sim.mesh().adjacency();
     let (_, components) = adjacency.element_components(sim.mesh());
-    let max_displacement = sim
-        .displacements()
-        .iter()
-        .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
-        .fold(0.0, f64::max);
+    let max_displacement =
+        sim.displacements().iter().map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()).fold(0.0, f64::max);
     let wall = *sim.timings();
     let total = started.elapsed().as_secs_f64();
     let summary = Summary {

@@ -118,16 +118,27 @@ pub struct BasisSpec {
     pub degree: Option<usize>,
     /// DG flux.
     pub flux: Option<Flux>,
+    /// Quadrature of mean value elements.
+    #[serde(default)]
+    pub quadrature: Quadrature,
 }
 
 impl Default for BasisSpec {
     fn default() -> Self {
-        BasisSpec {
-            family: Family::MeanValue,
-            degree: None,
-            flux: None,
-        }
+        BasisSpec { family: Family::MeanValue, degree: None, flux: None, quadrature: Quadrature::Consistent }
     }
+}
+
+/// Quadrature rules of mean value elements (see
+/// [`crate::store::QuadratureRule`]).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Quadrature {
+    /// The paper's points with the consistency correction (passes the patch test).
+    #[default]
+    Consistent,
+    /// The paper's heuristic rule as printed.
+    Paper,
 }
 
 /// Shape function families.
@@ -244,10 +255,7 @@ fn default_tolerance() -> f64 {
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec {
-            kind: SolverKind::Cholesky,
-            tolerance: default_tolerance(),
-        }
+        SolverSpec { kind: SolverKind::Cholesky, tolerance: default_tolerance() }
     }
 }
 
@@ -354,11 +362,7 @@ fn default_formats() -> Vec<Format> {
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        OutputSpec {
-            dir: None,
-            every: 1,
-            formats: default_formats(),
-        }
+        OutputSpec { dir: None, every: 1, formats: default_formats() }
     }
 }
 
@@ -384,20 +388,12 @@ impl Scene {
         let m = &self.mesh;
         match (&m.file, &m.generator) {
             (Some(_), Some(_)) => {
-                return Err(s.invalid(
-                    "mesh.generator",
-                    "…",
-                    "give either mesh.file or mesh.generator, not both",
-                ))
+                return Err(s.invalid("mesh.generator", "…", "give either mesh.file or mesh.generator, not both"))
             }
             (None, None) => return Err(s.invalid("mesh", "{}", "needs mesh.file or mesh.generator")),
             (None, Some(Generator::Box)) => {
                 let (Some(min), Some(max)) = (m.min, m.max) else {
-                    return Err(s.invalid(
-                        "mesh",
-                        "box",
-                        "a box generator needs min = [x, y, z] and max = [x, y, z]",
-                    ));
+                    return Err(s.invalid("mesh", "box", "a box generator needs min = [x, y, z] and max = [x, y, z]"));
                 };
                 if !finite3(&min) || !finite3(&max) || (0..3).any(|i| min[i] >= max[i]) {
                     return Err(s.invalid(
@@ -443,10 +439,9 @@ impl Scene {
         match self.basis.family {
             Family::MeanValue => {}
             Family::Harmonic | Family::Dg => {
-                return Err(s.unsupported(
-                    "basis.family",
-                    "only \"mean-value\" (linear on tetrahedra) is implemented yet",
-                ))
+                return Err(
+                    s.unsupported("basis.family", "only \"mean-value\" (linear on tetrahedra) is implemented yet")
+                )
             }
         }
         if self.basis.degree.is_some() || self.basis.flux.is_some() {
@@ -457,11 +452,7 @@ impl Scene {
             return Err(s.invalid("simulation.dt", sim.dt, "must be a finite number > 0 (s)"));
         }
         if !finite3(&sim.gravity) {
-            return Err(s.invalid(
-                "simulation.gravity",
-                format!("{:?}", sim.gravity),
-                "must be finite (m/s^2)",
-            ));
+            return Err(s.invalid("simulation.gravity", format!("{:?}", sim.gravity), "must be finite (m/s^2)"));
         }
         for (name, v) in [("mass", sim.damping.mass), ("stiffness", sim.damping.stiffness)] {
             if !(v >= 0.0 && v.is_finite()) {
@@ -473,19 +464,15 @@ impl Scene {
             }
         }
         if sim.mode == Mode::Dynamic {
-            return Err(s.unsupported(
-                "simulation.mode",
-                "dynamic simulation is not implemented yet; use mode = \"static\"",
-            ));
+            return Err(
+                s.unsupported("simulation.mode", "dynamic simulation is not implemented yet; use mode = \"static\"")
+            );
         }
         if !(self.solver.tolerance > 0.0 && self.solver.tolerance < 1.0) {
             return Err(s.invalid("solver.tolerance", self.solver.tolerance, "must lie in (0, 1)"));
         }
         if self.solver.kind == SolverKind::Cg {
-            return Err(s.unsupported(
-                "solver.kind",
-                "the CG solver is not implemented yet; use kind = \"cholesky\"",
-            ));
+            return Err(s.unsupported("solver.kind", "the CG solver is not implemented yet; use kind = \"cholesky\""));
         }
         for (i, f) in self.fixed.iter().enumerate() {
             let b = &f.region;
@@ -504,11 +491,7 @@ impl Scene {
                 ));
             }
             if !f.gradient.iter().all(finite3) {
-                return Err(s.invalid(
-                    &format!("fixed.{i}.gradient"),
-                    format!("{:?}", f.gradient),
-                    "must be finite",
-                ));
+                return Err(s.invalid(&format!("fixed.{i}.gradient"), format!("{:?}", f.gradient), "must be finite"));
             }
         }
         if !self.collider.is_empty() {
@@ -524,20 +507,15 @@ impl Scene {
             return Err(s.invalid("output.every", 0, "must be at least 1"));
         }
         if self.output.formats.contains(&Format::Png) {
-            return Err(s.unsupported(
-                "output.formats",
-                "png snapshots are not implemented yet; use \"vtu\" and \"obj\"",
-            ));
+            return Err(
+                s.unsupported("output.formats", "png snapshots are not implemented yet; use \"vtu\" and \"obj\"")
+            );
         }
         Ok(())
     }
 
     /// The material of the scene (range-checked at load).
     pub fn material(&self) -> Material {
-        Material {
-            young: self.material.young,
-            poisson: self.material.poisson,
-            density: self.material.density,
-        }
+        Material { young: self.material.young, poisson: self.material.poisson, density: self.material.density }
     }
 }

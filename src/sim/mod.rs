@@ -24,7 +24,7 @@ use crate::assembly::{Constraints, SparsePattern};
 use crate::material::Material;
 use crate::mesh::PolyMesh;
 use crate::solve::{solve_checked, Cholesky, LinearSolver, SolveStats};
-use crate::store::ElementStore;
+use crate::store::{BasisOptions, ElementStore};
 use crate::Error;
 
 /// Physical and numerical parameters of a simulation.
@@ -34,17 +34,16 @@ pub struct SimulationParams {
     pub material: Material,
     /// Gravitational acceleration (m/s^2).
     pub gravity: [f64; 3],
+    /// Basis construction options (quadrature of mean value elements).
+    pub basis: BasisOptions,
 }
 
 impl Default for SimulationParams {
     fn default() -> Self {
         SimulationParams {
-            material: Material {
-                young: 1e5,
-                poisson: 0.3,
-                density: 1000.0,
-            },
+            material: Material { young: 1e5, poisson: 0.3, density: 1000.0 },
             gravity: [0.0, 0.0, -9.81],
+            basis: BasisOptions::default(),
         }
     }
 }
@@ -65,12 +64,7 @@ pub struct FixedRegion {
 impl FixedRegion {
     /// Nodes in the box held at rest.
     pub fn clamp(min: [f64; 3], max: [f64; 3]) -> Self {
-        FixedRegion {
-            min,
-            max,
-            displacement: [0.0; 3],
-            gradient: [[0.0; 3]; 3],
-        }
+        FixedRegion { min, max, displacement: [0.0; 3], gradient: [[0.0; 3]; 3] }
     }
 
     /// Whether rest position `x` lies in the box (boundary included).
@@ -108,7 +102,7 @@ impl Simulation {
         }
         mesh.validate()?;
         let mut timings = PhaseTimings::default();
-        let store = timings.time(Phase::Basis, || ElementStore::build(&mesh, &params.material))?;
+        let store = timings.time(Phase::Basis, || ElementStore::build(&mesh, &params.material, &params.basis))?;
         let pattern = timings.time(Phase::Assembly, || SparsePattern::build(mesh.nodes.len(), &store));
         let masses = store.lumped_masses(mesh.nodes.len(), params.material.density);
         let n = mesh.nodes.len();
@@ -129,17 +123,10 @@ impl Simulation {
 
     /// Adds a Dirichlet region (checked for finite values).
     pub fn fix(&mut self, region: FixedRegion) -> Result<(), Error> {
-        let finite = region
-            .min
-            .iter()
-            .chain(&region.max)
-            .chain(&region.displacement)
-            .all(|v| v.is_finite())
+        let finite = region.min.iter().chain(&region.max).chain(&region.displacement).all(|v| v.is_finite())
             && region.gradient.iter().flatten().all(|v| v.is_finite());
         if !finite {
-            return Err(Error::Parameter(format!(
-                "fixed region {region:?} has a non-finite value"
-            )));
+            return Err(Error::Parameter(format!("fixed region {region:?} has a non-finite value")));
         }
         self.fixed.push(region);
         Ok(())
@@ -155,9 +142,7 @@ impl Simulation {
             )));
         }
         if !u.iter().all(|v| v.is_finite()) {
-            return Err(Error::Parameter(format!(
-                "cannot pin node {node} at non-finite displacement {u:?}"
-            )));
+            return Err(Error::Parameter(format!("cannot pin node {node} at non-finite displacement {u:?}")));
         }
         self.pinned.insert(node as u32, u);
         Ok(())
@@ -195,12 +180,7 @@ impl Simulation {
 
     /// Current node positions `x0 + u` (m).
     pub fn positions(&self) -> Vec<[f64; 3]> {
-        self.mesh
-            .nodes
-            .iter()
-            .zip(&self.displacement)
-            .map(|(x, u)| [x[0] + u[0], x[1] + u[1], x[2] + u[2]])
-            .collect()
+        self.mesh.nodes.iter().zip(&self.displacement).map(|(x, u)| [x[0] + u[0], x[1] + u[1], x[2] + u[2]]).collect()
     }
 
     /// Lumped nodal masses (kg).
@@ -221,11 +201,7 @@ impl Simulation {
     /// Von Mises stress of every element at its stress point (Pa).
     pub fn von_mises(&self) -> Vec<f64> {
         let (l, m) = self.params.material.lame();
-        self.store
-            .displacement_gradients(&self.displacement)
-            .into_iter()
-            .map(|g| von_mises(stress(g, l, m)))
-            .collect()
+        self.store.displacement_gradients(&self.displacement).into_iter().map(|g| von_mises(stress(g, l, m))).collect()
     }
 
     /// Elastic energy `½ uᵀ K u` (J) of the current displacement.
@@ -235,11 +211,7 @@ impl Simulation {
             let k = b.k;
             for i in 0..b.len() {
                 let ke = b.element_stiffness(i);
-                let u: Vec<f64> = b
-                    .element_nodes(i)
-                    .iter()
-                    .flat_map(|&v| self.displacement[v as usize])
-                    .collect();
+                let u: Vec<f64> = b.element_nodes(i).iter().flat_map(|&v| self.displacement[v as usize]).collect();
                 for r in 0..3 * k {
                     let row = &ke[r * 3 * k..(r + 1) * 3 * k];
                     e += 0.5 * u[r] * row.iter().zip(&u).map(|(a, b)| a * b).sum::<f64>();
@@ -251,11 +223,7 @@ impl Simulation {
 
     /// Kinetic energy `½ Σ m_i |v_i|²` (J).
     pub fn kinetic_energy(&self) -> f64 {
-        self.masses
-            .iter()
-            .zip(&self.velocity)
-            .map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]))
-            .sum()
+        self.masses.iter().zip(&self.velocity).map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
     }
 
     /// The Dirichlet constraints of the current fixed regions; nodes that
@@ -292,16 +260,11 @@ impl Simulation {
         let mut values = vec![0.0; self.pattern.nnz()];
         let store = &self.store;
         self.timings.time(Phase::Assembly, || {
-            self.pattern.assemble(store, &mut values, |b, i, out| {
-                out.copy_from_slice(store.batches[b].element_stiffness(i))
-            })
+            self.pattern
+                .assemble(store, &mut values, |b, i, out| out.copy_from_slice(store.batches[b].element_stiffness(i)))
         });
         let g = self.params.gravity;
-        let mut rhs: Vec<f64> = self
-            .masses
-            .iter()
-            .flat_map(|&m| [m * g[0], m * g[1], m * g[2]])
-            .collect();
+        let mut rhs: Vec<f64> = self.masses.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
         let constraints = self.constraints();
         constraints.apply(&self.pattern, &mut values, &mut rhs);
         let matrix = self.pattern.matrix(&values);

@@ -25,10 +25,7 @@ pub struct Cholesky {
 impl Cholesky {
     /// A solver that runs faer's kernels with `par` (default: the rayon pool).
     pub fn new(par: Par) -> Self {
-        Cholesky {
-            par: Some(par),
-            ..Default::default()
-        }
+        Cholesky { par: Some(par), ..Default::default() }
     }
 
     fn par(&self) -> Par {
@@ -81,10 +78,7 @@ impl LinearSolver for Cholesky {
         )
         .map_err(|e| match e {
             faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => {
-                SolveError::NotPositiveDefinite {
-                    pivot: index,
-                    n: matrix.nrows(),
-                }
+                SolveError::NotPositiveDefinite { pivot: index, n: matrix.nrows() }
             }
         })?;
         self.factored = true;
@@ -102,19 +96,11 @@ impl LinearSolver for Cholesky {
         x.copy_from_slice(b);
         let llt = LltRef::<'_, usize, f64>::new(sym, &self.l_values);
         let n = x.len();
-        llt.solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(x, n, 1),
-            par,
-            MemStack::new(buf),
-        );
+        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(x, n, 1), par, MemStack::new(buf));
         if x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        Ok(SolveStats {
-            iterations: 1,
-            residual: f64::NAN,
-        })
+        Ok(SolveStats { iterations: 1, residual: f64::NAN })
     }
 }
 

@@ -22,11 +22,7 @@ pub enum SolveError {
     Analysis(String),
     /// An iterative solver stopped before reaching its tolerance.
     #[error("the iterative solver did not converge: residual {residual:.3e} after {iterations} iterations (tolerance {tolerance:.1e})")]
-    NotConverged {
-        iterations: usize,
-        residual: f64,
-        tolerance: f64,
-    },
+    NotConverged { iterations: usize, residual: f64, tolerance: f64 },
     /// The right-hand side or the solution holds NaN or infinity.
     #[error("the system has a non-finite right-hand side or solution")]
     NonFinite,

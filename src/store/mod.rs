@@ -6,8 +6,13 @@
 //! stiffness `K_e` (`9 k^2`, row-major `3k x 3k`) and the shape function
 //! gradients at the element's stress point (`k`). Kernels run over a batch
 //! as over plain slices; a batch is rebuilt alone when its elements change.
+//!
+//! Tetrahedra form the `k = 4` batch and use the closed form ([`tet`]); all
+//! other convex elements use mean value shape functions ([`mean_value`]).
 
-use rayon::prelude::*;
+mod mean_value;
+mod tet;
+
 use thiserror::Error;
 
 use crate::material::Material;
@@ -16,13 +21,12 @@ use crate::mesh::PolyMesh;
 /// An element the basis cannot be built on.
 #[derive(Clone, Debug, Error, PartialEq)]
 pub enum BasisError {
-    /// No basis family handles this element yet.
-    #[error("element {element} has {vertices} vertices and {faces} faces; only linear tetrahedra are supported by this build")]
-    UnsupportedElement {
-        element: usize,
-        vertices: usize,
-        faces: usize,
-    },
+    /// The mean value family needs convex elements.
+    #[error("element {element} is not convex; mean value elements must be convex (use family = \"harmonic\")")]
+    NonConvex { element: usize },
+    /// More vertices than the kernels accept.
+    #[error("element {element} has {vertices} vertices; at most {max} are supported")]
+    TooManyVertices { element: usize, vertices: usize, max: usize },
     /// The element is flat or inverted at rest.
     #[error("element {element} is degenerate (volume {volume:.3e} m^3)")]
     DegenerateElement { element: usize, volume: f64 },
@@ -47,6 +51,15 @@ pub struct Batch {
     pub stiffness: Vec<f64>,
     /// Shape function gradients at the stress point (1/m), `k` per element.
     pub stress_grads: Vec<[f64; 3]>,
+    /// Surface triangles in local indices, outward, `2k - 4` per element
+    /// (empty for the closed-form tetrahedra).
+    pub triangles: Vec<[u32; 3]>,
+    /// Quadrature points (m), `points_per_element` per element.
+    pub points: Vec<[f64; 3]>,
+    /// Quadrature weights (m^3), `points_per_element` per element.
+    pub weights: Vec<f64>,
+    /// Quadrature points per element.
+    pub points_per_element: usize,
 }
 
 impl Batch {
@@ -72,6 +85,28 @@ impl Batch {
     }
 }
 
+/// How mean value elements are integrated (wicke2007 §3.4 and beyond).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum QuadratureRule {
+    /// The paper's points and weights with the per-element gradient
+    /// correction that makes the discrete divergence theorem exact, so the
+    /// patch test passes (default).
+    #[default]
+    Consistent,
+    /// The paper's heuristic rule as printed (fails the patch test slightly).
+    Paper,
+    /// Gauss–Legendre on the sub-tetrahedra from the centroid, `n^3` points
+    /// per surface triangle (slow; a reference for tests).
+    Reference(usize),
+}
+
+/// Options of the basis construction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BasisOptions {
+    /// Quadrature of mean value elements.
+    pub quadrature: QuadratureRule,
+}
+
 /// Every element of a mesh, batched by vertex count.
 #[derive(Clone, Debug, Default)]
 pub struct ElementStore {
@@ -81,36 +116,25 @@ pub struct ElementStore {
     pub locate: Vec<(u32, u32)>,
 }
 
-/// Whether element `e` of `mesh` is a linear tetrahedron.
-fn is_tet(mesh: &PolyMesh, e: usize) -> bool {
-    let el = &mesh.elements[e];
-    el.nodes.len() == 4 && el.faces.len() == 4
-}
-
 impl ElementStore {
     /// Builds the store: gathers every element into its batch and computes
     /// volumes, mass fractions, `K_e` and stress-point gradients.
-    pub fn build(mesh: &PolyMesh, material: &Material) -> Result<Self, BasisError> {
+    pub fn build(mesh: &PolyMesh, material: &Material, options: &BasisOptions) -> Result<Self, BasisError> {
         let mut by_k: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
         for (e, el) in mesh.elements.iter().enumerate() {
-            if !is_tet(mesh, e) {
-                return Err(BasisError::UnsupportedElement {
-                    element: e,
-                    vertices: el.nodes.len(),
-                    faces: el.faces.len(),
-                });
-            }
             by_k.entry(el.nodes.len()).or_default().push(e as u32);
         }
-        let mut store = ElementStore {
-            batches: Vec::new(),
-            locate: vec![(0, 0); mesh.elements.len()],
-        };
+        let mut store = ElementStore { batches: Vec::new(), locate: vec![(0, 0); mesh.elements.len()] };
         for (b, (k, elements)) in by_k.into_iter().enumerate() {
             for (i, &e) in elements.iter().enumerate() {
                 store.locate[e as usize] = (b as u32, i as u32);
             }
-            store.batches.push(build_tet_batch(mesh, material, k, elements)?);
+            let batch = if k == 4 {
+                tet::build_batch(mesh, material, elements)?
+            } else {
+                mean_value::build_batch(mesh, material, options.quadrature, k, elements)?
+            };
+            store.batches.push(batch);
         }
         Ok(store)
     }
@@ -154,51 +178,4 @@ impl ElementStore {
         }
         out
     }
-}
-
-/// Closed-form linear tetrahedra: one quadrature point, constant gradients,
-/// mass fractions 1/4.
-fn build_tet_batch(mesh: &PolyMesh, material: &Material, k: usize, elements: Vec<u32>) -> Result<Batch, BasisError> {
-    let (lambda, mu) = material.lame();
-    let n = elements.len();
-    let nodes: Vec<u32> = elements
-        .iter()
-        .flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied())
-        .collect();
-    let rest: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
-    let mut volume = vec![0.0; n];
-    let mut stiffness = vec![0.0; n * 9 * k * k];
-    let mut stress_grads = vec![[0.0; 3]; n * k];
-    volume
-        .par_iter_mut()
-        .zip(stiffness.par_chunks_mut(9 * k * k))
-        .zip(stress_grads.par_chunks_mut(k))
-        .enumerate()
-        .try_for_each(|(i, ((vol, ke), grads))| {
-            let x: [[f64; 3]; 4] = std::array::from_fn(|a| rest[i * k + a]);
-            let bad = || BasisError::DegenerateElement {
-                element: elements[i] as usize,
-                volume: cleave_kernels::tet::signed_volume(x[0], x[1], x[2], x[3]),
-            };
-            let (v, g) = cleave_kernels::tet::gradients(&x).ok_or_else(bad)?;
-            // local node order is sorted by id, so the sign of v is arbitrary
-            let v = v.abs();
-            if !(v > 0.0) {
-                return Err(bad());
-            }
-            *vol = v;
-            grads.copy_from_slice(&g);
-            cleave_kernels::elasticity::element_stiffness(&g, &[v], k, lambda, mu, ke);
-            Ok(())
-        })?;
-    Ok(Batch {
-        k,
-        elements,
-        nodes,
-        rest,
-        volume,
-        mass_fraction: vec![0.25; n * k],
-        stiffness,
-        stress_grads,
-    })
 }

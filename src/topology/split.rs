@@ -127,8 +127,7 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
             let (lo, hi) = key;
             let t = dist[lo as usize] / (dist[lo as usize] - dist[hi as usize]);
             let id = mesh.nodes.len() as u32;
-            mesh.nodes
-                .push(lerp(mesh.nodes[lo as usize], mesh.nodes[hi as usize], t));
+            mesh.nodes.push(lerp(mesh.nodes[lo as usize], mesh.nodes[hi as usize], t));
             report.new_nodes.push(NewNode { id, a: lo, b: hi, t });
             id
         })
@@ -163,15 +162,9 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
                 }
             }
             let f_pos = r.face;
-            mesh.faces[f_pos as usize] = Face {
-                vertices: pos,
-                triangles: Vec::new(),
-            };
+            mesh.faces[f_pos as usize] = Face { vertices: pos, triangles: Vec::new() };
             let f_neg = mesh.faces.len() as u32;
-            mesh.faces.push(Face {
-                vertices: neg,
-                triangles: Vec::new(),
-            });
+            mesh.faces.push(Face { vertices: neg, triangles: Vec::new() });
             mesh.triangulate_face(f_pos as usize);
             mesh.triangulate_face(f_neg as usize);
             face_parts.insert(r.face, (f_pos, f_neg));
@@ -185,14 +178,8 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
         let mut cap_points: Vec<u32> = Vec::new();
         for r in &refs {
             if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
-                pos_faces.push(FaceRef {
-                    face: fp,
-                    outward: r.outward,
-                });
-                neg_faces.push(FaceRef {
-                    face: fneg,
-                    outward: r.outward,
-                });
+                pos_faces.push(FaceRef { face: fp, outward: r.outward });
+                neg_faces.push(FaceRef { face: fneg, outward: r.outward });
                 cap_points.extend(
                     mesh.faces[fp as usize]
                         .vertices
@@ -208,10 +195,7 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
             } else if v.iter().any(|&x| side[x as usize] < 0) {
                 neg_faces.push(*r);
             } else {
-                return Err(SplitError::NonConvexElement {
-                    element: e,
-                    face: r.face as usize,
-                });
+                return Err(SplitError::NonConvexElement { element: e, face: r.face as usize });
             }
         }
         cap_points.sort_unstable();
@@ -221,9 +205,7 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
         }
         // order the cap counter-clockwise about +n
         let c = scale(
-            cap_points.iter().fold([0.0; 3], |acc, &p| {
-                cleave_kernels::vec3::add(acc, mesh.nodes[p as usize])
-            }),
+            cap_points.iter().fold([0.0; 3], |acc, &p| cleave_kernels::vec3::add(acc, mesh.nodes[p as usize])),
             1.0 / cap_points.len() as f64,
         );
         let angle = |p: u32| {
@@ -232,27 +214,15 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
         };
         cap_points.sort_by(|&a, &b| angle(a).total_cmp(&angle(b)));
         let cap = mesh.faces.len() as u32;
-        mesh.faces.push(Face {
-            vertices: cap_points,
-            triangles: Vec::new(),
-        });
+        mesh.faces.push(Face { vertices: cap_points, triangles: Vec::new() });
         mesh.triangulate_face(cap as usize);
         // the cap's normal is +n: it points out of the negative part
-        pos_faces.push(FaceRef {
-            face: cap,
-            outward: false,
-        });
-        neg_faces.push(FaceRef {
-            face: cap,
-            outward: true,
-        });
+        pos_faces.push(FaceRef { face: cap, outward: false });
+        neg_faces.push(FaceRef { face: cap, outward: true });
         mesh.elements[e].faces = pos_faces;
         mesh.refresh_element_nodes(e);
         let ne = mesh.elements.len();
-        mesh.elements.push(crate::mesh::Element {
-            faces: neg_faces,
-            nodes: Vec::new(),
-        });
+        mesh.elements.push(crate::mesh::Element { faces: neg_faces, nodes: Vec::new() });
         mesh.refresh_element_nodes(ne);
         report.split_elements.push((e as u32, ne as u32));
     }
@@ -261,11 +231,7 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
 
 /// Two unit vectors `(u, w)` with `(u, w, n)` right-handed.
 fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let a = if n[0].abs() < 0.9 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
+    let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
     let u = cross(a, n);
     let u = scale(u, 1.0 / norm(u));
     (u, cross(n, u))

@@ -1,0 +1,186 @@
+//! Mean value coordinates of a closed triangulated polyhedron and their
+//! gradients (wicke2007 §3.2; Floater, Kós & Reimers 2005; Ju, Schaefer &
+//! Warren 2005).
+//!
+//! For a point `x` inside the element, with `d_j = |x_j - x|` and unit
+//! vectors `u_j = (x_j - x) / d_j`, every surface triangle `(a, b, c)`
+//! projects to a spherical triangle on the unit sphere around `x`. Its mean
+//! vector (the integral of the unit normal over the spherical triangle) is
+//!
+//! ```text
+//! m = ½ (β_bc n_bc + β_ca n_ca + β_ab n_ab),
+//!     n_ij = (u_i × u_j) / |u_i × u_j|,  β_ij = atan2(|u_i × u_j|, u_i · u_j),
+//! ```
+//!
+//! and it splits as `m = λ_a u_a + λ_b u_b + λ_c u_c` with
+//! `λ_a = (m · n_bc) / (u_a · n_bc)` (and cyclically). The weights are
+//! `w_j = Σ_{triangles ∋ j} λ_j / d_j` and the shape functions
+//! `φ_j = w_j / Σ_l w_l`. Reversing every triangle flips the sign of every
+//! `w_j` and leaves `φ_j` unchanged.
+//!
+//! Gradients `∇φ_j` (1/m) come from forward dual numbers carried through the
+//! same arithmetic (the printed gradient formulas of wicke2007, eq. 20-21,
+//! are garbled), so value and gradient can never disagree.
+//!
+//! Data layout of [`evaluate`]: `vertices[k]`, `triangles[t]` (local vertex
+//! indices), `points[q]` in; `phi[a * Q + q]` and
+//! `grad[(3 a + i) * Q + q]` (component `i` of `∇φ_a` at point `q`) out.
+//! Lanes run over the points of one element: every lane shares the
+//! element's vertices and triangles, so nothing is gathered.
+
+use pulp::Simd;
+
+use crate::lanes::{Dual, Lanes, Real};
+
+/// Mean value weights `w_j` (with gradients) at `x`; `u`, `d`, `w` are
+/// scratch of length `k` (`w` is the output).
+#[inline(always)]
+fn weights<R: Real>(
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    x: [Dual<R>; 3],
+    u: &mut [[Dual<R>; 3]],
+    d: &mut [Dual<R>],
+    w: &mut [Dual<R>],
+) {
+    let zero = x[0].constant(0.0);
+    for (j, p) in vertices.iter().enumerate() {
+        let r = [x[0].constant(p[0]) - x[0], x[1].constant(p[1]) - x[1], x[2].constant(p[2]) - x[2]];
+        let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        let inv = len.constant(1.0) / len;
+        u[j] = [r[0] * inv, r[1] * inv, r[2] * inv];
+        d[j] = len;
+        w[j] = zero;
+    }
+    let cross = |a: [Dual<R>; 3], b: [Dual<R>; 3]| {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    };
+    let dot = |a: [Dual<R>; 3], b: [Dual<R>; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    // unit normal of the great circle through (a, b) and the arc angle
+    let edge = |a: [Dual<R>; 3], b: [Dual<R>; 3]| {
+        let c = cross(a, b);
+        let s = dot(c, c).sqrt();
+        let inv = s.constant(1.0) / s;
+        ([c[0] * inv, c[1] * inv, c[2] * inv], s.atan2_upper(dot(a, b)))
+    };
+    for t in triangles {
+        let (ia, ib, ic) = (t[0] as usize, t[1] as usize, t[2] as usize);
+        let (ua, ub, uc) = (u[ia], u[ib], u[ic]);
+        let (n_bc, b_bc) = edge(ub, uc);
+        let (n_ca, b_ca) = edge(uc, ua);
+        let (n_ab, b_ab) = edge(ua, ub);
+        let half = zero.constant(0.5);
+        let m: [Dual<R>; 3] = core::array::from_fn(|i| half * (b_bc * n_bc[i] + b_ca * n_ca[i] + b_ab * n_ab[i]));
+        w[ia] = w[ia] + dot(m, n_bc) / (dot(ua, n_bc) * d[ia]);
+        w[ib] = w[ib] + dot(m, n_ca) / (dot(ub, n_ca) * d[ib]);
+        w[ic] = w[ic] + dot(m, n_ab) / (dot(uc, n_ab) * d[ic]);
+    }
+}
+
+/// `φ_j` and `∇φ_j` at `x` into `w` (normalised in place).
+#[inline(always)]
+fn shape_functions<R: Real>(
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    x: [Dual<R>; 3],
+    u: &mut [[Dual<R>; 3]],
+    d: &mut [Dual<R>],
+    w: &mut [Dual<R>],
+) {
+    weights(vertices, triangles, x, u, d, w);
+    let mut sum = w[0];
+    for wj in &w[1..] {
+        sum = sum + *wj;
+    }
+    for wj in w.iter_mut() {
+        *wj = *wj / sum;
+    }
+}
+
+/// Checks the sizes of an evaluation; panics on a caller bug.
+fn check_layout(k: usize, triangles: &[[u32; 3]], points: usize, phi: &[f64], grad: &[f64]) {
+    assert!(k >= 4, "a polyhedron has at least 4 vertices");
+    assert!(triangles.iter().flatten().all(|&i| (i as usize) < k), "triangle index out of range");
+    assert_eq!(phi.len(), k * points, "phi must hold k * Q values");
+    assert_eq!(grad.len(), 3 * k * points, "grad must hold 3 k Q values");
+}
+
+/// Scalar reference of [`evaluate`] (plain `f64`, `std` functions).
+pub fn evaluate_scalar(
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    points: &[[f64; 3]],
+    phi: &mut [f64],
+    grad: &mut [f64],
+) {
+    let (k, nq) = (vertices.len(), points.len());
+    check_layout(k, triangles, nq, phi, grad);
+    let z = Dual::constant_of(0.0);
+    let mut u = vec![[z; 3]; k];
+    let mut d = vec![z; k];
+    let mut w = vec![z; k];
+    for (q, p) in points.iter().enumerate() {
+        let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
+        shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
+        for (a, wa) in w.iter().enumerate() {
+            phi[a * nq + q] = wa.v;
+            for i in 0..3 {
+                grad[(3 * a + i) * nq + q] = wa.d[i];
+            }
+        }
+    }
+}
+
+struct Evaluate<'a> {
+    vertices: &'a [[f64; 3]],
+    triangles: &'a [[u32; 3]],
+    points: &'a [[f64; 3]],
+    phi: &'a mut [f64],
+    grad: &'a mut [f64],
+}
+
+impl pulp::WithSimd for Evaluate<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Evaluate { vertices, triangles, points, phi, grad } = self;
+        let (k, nq) = (vertices.len(), points.len());
+        let width = Lanes::<S>::WIDTH;
+        let z = Dual::constant_of(Lanes::splat(simd, 0.0));
+        let mut u = vec![[z; 3]; k];
+        let mut d = vec![z; k];
+        let mut w = vec![z; k];
+        let mut coords = [[0.0f64; 16]; 3];
+        for q0 in (0..nq).step_by(width) {
+            let n = width.min(nq - q0);
+            for (i, lanes) in coords.iter_mut().enumerate() {
+                for (l, p) in points[q0..q0 + n].iter().enumerate() {
+                    lanes[l] = p[i];
+                }
+                // pad the last group with a copy of its first point (inside)
+                let first = lanes[0];
+                lanes[n..width].fill(first);
+            }
+            let x: [Dual<Lanes<S>>; 3] =
+                core::array::from_fn(|i| Dual::variable(Lanes::load(simd, &coords[i][..width]), i));
+            shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
+            for (a, wa) in w.iter().enumerate() {
+                wa.v.store(&mut phi[a * nq + q0..a * nq + q0 + n]);
+                for i in 0..3 {
+                    let o = (3 * a + i) * nq + q0;
+                    wa.d[i].store(&mut grad[o..o + n]);
+                }
+            }
+        }
+    }
+}
+
+/// Values and gradients of the mean value shape functions of one element
+/// (`vertices`, outward or consistently oriented `triangles`) at `points`
+/// strictly inside it; layout in the module docs. SIMD over points with the
+/// instruction set chosen at run time.
+pub fn evaluate(vertices: &[[f64; 3]], triangles: &[[u32; 3]], points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64]) {
+    check_layout(vertices.len(), triangles, points.len(), phi, grad);
+    pulp::Arch::new().dispatch(Evaluate { vertices, triangles, points, phi, grad });
+}
