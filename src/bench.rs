@@ -7,9 +7,11 @@ use serde::Serialize;
 
 use crate::assembly::SparsePattern;
 use crate::material::Material;
-use crate::meshing::box_tet;
+use crate::mesh::{Cell, PolyMesh};
+use crate::meshing::{box_tet, clipped_box};
 use crate::solve::{Cholesky, LinearSolver};
 use crate::store::{BasisOptions, ElementStore};
+use crate::topology::{split_by_plane, Plane, SplitOptions};
 use crate::Error;
 
 /// One measured stage.
@@ -50,7 +52,7 @@ impl Report {
         for m in &self.measurements {
             s += &format!("{:<24} {:<22} {:>10} {:>12.3} {:>16.0}", m.name, m.mesh, m.elements, m.ms, m.elements_per_s);
             if let Some((k, v)) = &m.extra {
-                s += &format!("  {k} = {v:.0}");
+                s += &if *v < 100.0 { format!("  {k} = {v:.2}") } else { format!("  {k} = {v:.0}") };
             }
             s.push('\n');
         }
@@ -69,6 +71,65 @@ fn best_ms<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
         out = Some(r);
     }
     (best, out.expect("at least one repetition"))
+}
+
+/// A single convex element with exactly `k` vertices (a clipped box; the
+/// first seed that gives `k`), or `None`.
+pub fn element_with_vertices(k: usize) -> Option<PolyMesh> {
+    (0..30)
+        .flat_map(|planes| (0..40).map(move |seed| (planes, seed)))
+        .find_map(|(planes, seed)| clipped_box([0.0; 3], [1.0; 3], planes, seed).ok().filter(|m| m.nodes.len() == k))
+}
+
+/// `n` disjoint copies of the single-element `mesh`, side by side.
+pub fn replicate(mesh: &PolyMesh, n: usize) -> Result<PolyMesh, Error> {
+    let k = mesh.nodes.len();
+    let loops: Vec<Vec<u32>> = mesh.elements[0]
+        .faces
+        .iter()
+        .map(|r| {
+            let v = &mesh.faces[r.face as usize].vertices;
+            if r.outward {
+                v.clone()
+            } else {
+                v.iter().rev().copied().collect()
+            }
+        })
+        .collect();
+    let mut nodes = Vec::with_capacity(n * k);
+    let mut cells = Vec::with_capacity(n);
+    for c in 0..n {
+        let shift = [2.0 * (c % 100) as f64, 2.0 * (c / 100) as f64, 0.0];
+        nodes.extend(mesh.nodes.iter().map(|p| [p[0] + shift[0], p[1] + shift[1], p[2]]));
+        let base = (c * k) as u32;
+        cells.push(Cell::Polyhedron(loops.iter().map(|l| l.iter().map(|&v| v + base).collect()).collect()));
+    }
+    Ok(PolyMesh::from_cells(nodes, &cells)?)
+}
+
+/// Wall time (ms) of evaluating the mean value basis at the paper's points of
+/// `mesh`'s single element `reps` times, SIMD (`true`) or scalar reference.
+fn basis_eval_ms(mesh: &PolyMesh, reps: usize, simd: bool) -> (f64, usize) {
+    use cleave_kernels::{mean_value, quadrature};
+    let nodes = &mesh.elements[0].nodes;
+    let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
+    let tris: Vec<[u32; 3]> =
+        mesh.element_triangles(0).map(|t| t.map(|g| nodes.binary_search(&g).unwrap_or(0) as u32)).collect();
+    let k = verts.len();
+    let nq = quadrature::paper_rule_len(k, tris.len());
+    let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; k]);
+    quadrature::paper_rule(&verts, &tris, &mut p, &mut w, &mut mu);
+    let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
+    let (ms, ()) = best_ms(3, || {
+        for _ in 0..reps {
+            if simd {
+                mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad);
+            } else {
+                mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad);
+            }
+        }
+    });
+    (ms, reps * nq)
 }
 
 /// Runs the suite (`quick`: small meshes, for smoke tests).
@@ -117,5 +178,56 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let (ms, r) = best_ms(3, || chol.solve(&b, &mut x));
     r?;
     push("cholesky solve", ms, None);
+    // mean value elements: basis evaluation and K_e build per vertex count
+    let copies = if quick { 1000 } else { 10_000 };
+    for k in [8, 12, 16, 24] {
+        let Some(one) = element_with_vertices(k) else { continue };
+        let (simd_ms, points) = basis_eval_ms(&one, copies, true);
+        let (scalar_ms, _) = basis_eval_ms(&one, copies, false);
+        let batch = replicate(&one, copies)?;
+        let (ms, store) = best_ms(3, || ElementStore::build(&batch, &material, &BasisOptions::default()));
+        store?;
+        let label = format!("{copies} x {k}-vertex");
+        let m = |name: String, ms: f64, extra| Measurement {
+            name,
+            mesh: label.clone(),
+            elements: copies,
+            nodes: copies * k,
+            ms,
+            elements_per_s: copies as f64 / (ms * 1e-3),
+            extra,
+        };
+        out.push(m(
+            format!("MV basis k={k} (1 thread)"),
+            simd_ms,
+            Some(("points/s".into(), points as f64 / (simd_ms * 1e-3))),
+        ));
+        out.push(m(format!("MV basis k={k} scalar"), scalar_ms, Some(("simd speed-up".into(), scalar_ms / simd_ms))));
+        out.push(m(format!("MV K_e build k={k}"), ms, None));
+    }
+    // global assembly on a mixed mesh of about 100k elements
+    let cells = if quick { [12, 6, 6] } else { [40, 20, 20] };
+    let mut mixed = box_tet([0.0; 3], [2.0, 1.0, 1.0], cells)?;
+    for (i, x) in [0.31, 0.77, 1.23, 1.61].iter().enumerate() {
+        let normal = [1.0, 0.3 * i as f64, -0.2];
+        split_by_plane(&mut mixed, &Plane { point: [*x, 0.5, 0.5], normal }, &SplitOptions::default())?;
+    }
+    let store = ElementStore::build(&mixed, &material, &BasisOptions::default())?;
+    let pattern = SparsePattern::build(mixed.nodes.len(), &store);
+    let mut values = vec![0.0; pattern.nnz()];
+    let (ms, ()) = best_ms(5, || {
+        values.fill(0.0);
+        pattern.assemble(&store, &mut values, |b, i, o| o.copy_from_slice(store.batches[b].element_stiffness(i)))
+    });
+    let ne = mixed.elements.len();
+    out.push(Measurement {
+        name: "assembly (mixed)".into(),
+        mesh: format!("box_tet {}x{}x{} + 4 cuts", cells[0], cells[1], cells[2]),
+        elements: ne,
+        nodes: mixed.nodes.len(),
+        ms,
+        elements_per_s: ne as f64 / (ms * 1e-3),
+        extra: Some(("polyhedra".into(), (ne - store.batches[0].len()) as f64)),
+    });
     Ok(Report { threads: rayon::current_num_threads(), measurements: out })
 }

@@ -123,3 +123,26 @@ fn cantilever_scene_runs_and_writes_frames() {
     assert!(ok, "{err}");
     assert!(stdout.contains("6916") && stdout.contains("validation: ok"), "{stdout}");
 }
+
+#[test]
+fn every_shipped_scene_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(root().join("scenes")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let scene = LoadedScene::load(&path).unwrap();
+            let out = dir.path().join(path.file_stem().unwrap());
+            let summary =
+                cleave::scene::run_scene(&scene, &cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(3) })
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(summary.max_displacement.is_finite() && summary.max_displacement > 0.0);
+            assert!((summary.end.volume - summary.start.volume).abs() <= 1e-12 * summary.start.volume);
+            assert!(out.join("summary.json").exists());
+            names.push(path.file_stem().unwrap().to_string_lossy().into_owned());
+        }
+    }
+    names.sort();
+    println!("ran {names:?}");
+    assert!(names.len() >= 4, "{names:?}");
+}

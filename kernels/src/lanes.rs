@@ -39,29 +39,29 @@ pub trait Real:
     /// rational function (relative error below 4e-16, tested against `std`).
     #[inline(always)]
     fn atan2_upper(self, x: Self) -> Self {
-        let c = |v: f64| self.constant(v);
         let ax = x.abs();
         let lo = self.min(ax);
         let hi = self.max(ax);
-        let t = lo / hi.max(c(f64::MIN_POSITIVE));
-        let big = c(0.66).select_less(t, c(1.0), c(0.0)); // 1 where t > 0.66
-        let tr = big.mul_add((t - c(1.0)) / (t + c(1.0)) - t, t);
+        let t = lo / hi.max(self.constant(f64::MIN_POSITIVE));
+        let big = self.constant(0.66).select_less(t, self.constant(1.0), self.constant(0.0)); // 1 where t > 0.66
+        let tr = big.mul_add((t - self.constant(1.0)) / (t + self.constant(1.0)) - t, t);
         let z = tr * tr;
-        let mut p = c(ATAN_P[0]);
+        let mut p = self.constant(ATAN_P[0]);
         for &k in &ATAN_P[1..] {
-            p = p.mul_add(z, c(k));
+            p = p.mul_add(z, self.constant(k));
         }
-        let mut q = z + c(ATAN_Q[0]);
+        let mut q = z + self.constant(ATAN_Q[0]);
         for &k in &ATAN_Q[1..] {
-            q = q.mul_add(z, c(k));
+            q = q.mul_add(z, self.constant(k));
         }
         let r = tr.mul_add(z * p / q, tr);
         // + π/4 (with the low-order part of π/4) where reduced
-        let a = big.mul_add(c(core::f64::consts::FRAC_PI_4) + c(0.5 * 6.123_233_995_736_766e-17), r);
+        let a = big
+            .mul_add(self.constant(core::f64::consts::FRAC_PI_4) + self.constant(0.5 * 6.123_233_995_736_766e-17), r);
         // angle of (|x|, y): a if y <= |x|, else π/2 - a
-        let a = ax.select_less(self, c(core::f64::consts::FRAC_PI_2) - a, a);
+        let a = ax.select_less(self, self.constant(core::f64::consts::FRAC_PI_2) - a, a);
         // reflect for x < 0
-        x.select_less(c(0.0), c(core::f64::consts::PI) - a, a)
+        x.select_less(self.constant(0.0), self.constant(core::f64::consts::PI) - a, a)
     }
 }
 
@@ -311,8 +311,11 @@ impl<R: Real> Real for Dual<R> {
     }
     #[inline(always)]
     fn select_less(self, other: Self, a: Self, b: Self) -> Self {
-        let pick = |x: R, y: R| self.v.select_less(other.v, x, y);
-        Dual { v: pick(a.v, b.v), d: [pick(a.d[0], b.d[0]), pick(a.d[1], b.d[1]), pick(a.d[2], b.d[2])] }
+        let (s, o) = (self.v, other.v);
+        Dual {
+            v: s.select_less(o, a.v, b.v),
+            d: [s.select_less(o, a.d[0], b.d[0]), s.select_less(o, a.d[1], b.d[1]), s.select_less(o, a.d[2], b.d[2])],
+        }
     }
     #[inline(always)]
     fn sqrt(self) -> Self {

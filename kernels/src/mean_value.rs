@@ -32,8 +32,30 @@ use pulp::Simd;
 
 use crate::lanes::{Dual, Lanes, Real};
 
+#[inline(always)]
+fn cross<R: Real>(a: [R; 3], b: [R; 3]) -> [R; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[inline(always)]
+fn dot<R: Real>(a: [R; 3], b: [R; 3]) -> R {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Unit normal of the great circle through unit vectors `a`, `b` and the
+/// arc angle between them.
+#[inline(always)]
+fn arc<R: Real>(a: [R; 3], b: [R; 3]) -> ([R; 3], R) {
+    let c = cross(a, b);
+    let s = dot(c, c).sqrt();
+    let inv = s.constant(1.0) / s;
+    ([c[0] * inv, c[1] * inv, c[2] * inv], s.atan2_upper(dot(a, b)))
+}
+
 /// Mean value weights `w_j` (with gradients) at `x`; `u`, `d`, `w` are
-/// scratch of length `k` (`w` is the output).
+/// scratch of length `k` (`w` is the output). Every helper is
+/// `#[inline(always)]` so that the SIMD instruction set chosen at run time
+/// reaches all of the arithmetic.
 #[inline(always)]
 fn weights<R: Real>(
     vertices: &[[f64; 3]],
@@ -44,33 +66,26 @@ fn weights<R: Real>(
     w: &mut [Dual<R>],
 ) {
     let zero = x[0].constant(0.0);
+    let half = x[0].constant(0.5);
     for (j, p) in vertices.iter().enumerate() {
         let r = [x[0].constant(p[0]) - x[0], x[1].constant(p[1]) - x[1], x[2].constant(p[2]) - x[2]];
-        let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        let len = dot(r, r).sqrt();
         let inv = len.constant(1.0) / len;
         u[j] = [r[0] * inv, r[1] * inv, r[2] * inv];
         d[j] = len;
         w[j] = zero;
     }
-    let cross = |a: [Dual<R>; 3], b: [Dual<R>; 3]| {
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    };
-    let dot = |a: [Dual<R>; 3], b: [Dual<R>; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    // unit normal of the great circle through (a, b) and the arc angle
-    let edge = |a: [Dual<R>; 3], b: [Dual<R>; 3]| {
-        let c = cross(a, b);
-        let s = dot(c, c).sqrt();
-        let inv = s.constant(1.0) / s;
-        ([c[0] * inv, c[1] * inv, c[2] * inv], s.atan2_upper(dot(a, b)))
-    };
     for t in triangles {
         let (ia, ib, ic) = (t[0] as usize, t[1] as usize, t[2] as usize);
         let (ua, ub, uc) = (u[ia], u[ib], u[ic]);
-        let (n_bc, b_bc) = edge(ub, uc);
-        let (n_ca, b_ca) = edge(uc, ua);
-        let (n_ab, b_ab) = edge(ua, ub);
-        let half = zero.constant(0.5);
-        let m: [Dual<R>; 3] = core::array::from_fn(|i| half * (b_bc * n_bc[i] + b_ca * n_ca[i] + b_ab * n_ab[i]));
+        let (n_bc, b_bc) = arc(ub, uc);
+        let (n_ca, b_ca) = arc(uc, ua);
+        let (n_ab, b_ab) = arc(ua, ub);
+        let m = [
+            half * (b_bc * n_bc[0] + b_ca * n_ca[0] + b_ab * n_ab[0]),
+            half * (b_bc * n_bc[1] + b_ca * n_ca[1] + b_ab * n_ab[1]),
+            half * (b_bc * n_bc[2] + b_ca * n_ca[2] + b_ab * n_ab[2]),
+        ];
         w[ia] = w[ia] + dot(m, n_bc) / (dot(ua, n_bc) * d[ia]);
         w[ib] = w[ib] + dot(m, n_ca) / (dot(ub, n_ca) * d[ib]);
         w[ic] = w[ic] + dot(m, n_ab) / (dot(uc, n_ab) * d[ic]);
@@ -162,8 +177,11 @@ impl pulp::WithSimd for Evaluate<'_> {
                 let first = lanes[0];
                 lanes[n..width].fill(first);
             }
-            let x: [Dual<Lanes<S>>; 3] =
-                core::array::from_fn(|i| Dual::variable(Lanes::load(simd, &coords[i][..width]), i));
+            let x = [
+                Dual::variable(Lanes::load(simd, &coords[0][..width]), 0),
+                Dual::variable(Lanes::load(simd, &coords[1][..width]), 1),
+                Dual::variable(Lanes::load(simd, &coords[2][..width]), 2),
+            ];
             shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
             for (a, wa) in w.iter().enumerate() {
                 wa.v.store(&mut phi[a * nq + q0..a * nq + q0 + n]);
@@ -183,4 +201,64 @@ impl pulp::WithSimd for Evaluate<'_> {
 pub fn evaluate(vertices: &[[f64; 3]], triangles: &[[u32; 3]], points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64]) {
     check_layout(vertices.len(), triangles, points.len(), phi, grad);
     pulp::Arch::new().dispatch(Evaluate { vertices, triangles, points, phi, grad });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A cube with a corner cut off (k = 10), outward triangles.
+    fn element() -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+        let v = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [0.0, 1.0, 1.0],
+            [1.0, 0.6, 1.0],
+            [0.6, 1.0, 1.0],
+            [1.0, 1.0, 0.6],
+        ];
+        let faces: [&[u32]; 7] = [
+            &[0, 3, 2, 1],
+            &[4, 5, 7, 8, 6],
+            &[0, 1, 5, 4],
+            &[1, 2, 9, 7, 5],
+            &[2, 3, 6, 8, 9],
+            &[3, 0, 4, 6],
+            &[7, 9, 8],
+        ];
+        let t = faces.iter().flat_map(|f| (1..f.len() - 1).map(move |i| [f[0], f[i], f[i + 1]])).collect();
+        (v, t)
+    }
+
+    /// Every instruction set this machine offers gives the same bits.
+    #[test]
+    fn instruction_sets_agree_bitwise() {
+        let (v, t) = element();
+        let pts: Vec<[f64; 3]> =
+            (0..11).map(|i| [0.1 + 0.07 * i as f64, 0.5 - 0.03 * i as f64, 0.2 + 0.05 * i as f64]).collect();
+        let n = v.len() * pts.len();
+        let (mut phi0, mut grad0) = (vec![0.0; n], vec![0.0; 3 * n]);
+        evaluate_scalar(&v, &t, &pts, &mut phi0, &mut grad0);
+        let run = |simd: &dyn Fn(Evaluate)| {
+            let (mut phi, mut grad) = (vec![0.0; n], vec![0.0; 3 * n]);
+            simd(Evaluate { vertices: &v, triangles: &t, points: &pts, phi: &mut phi, grad: &mut grad });
+            assert_eq!(phi, phi0);
+            assert_eq!(grad, grad0);
+        };
+        run(&|op| pulp::WithSimd::with_simd(op, pulp::Scalar::new()));
+        run(&|op| pulp::Arch::new().dispatch(op));
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                run(&|op| simd.vectorize(|| pulp::WithSimd::with_simd(op, simd)));
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                run(&|op| simd.vectorize(|| pulp::WithSimd::with_simd(op, simd)));
+            }
+        }
+    }
 }

@@ -276,6 +276,35 @@ impl PolyMesh {
         (lo, hi)
     }
 
+    /// A new mesh holding only `elements` (in that order), with unused nodes
+    /// and faces dropped; returns it and the new id of every old node
+    /// (`u32::MAX` for dropped ones).
+    pub fn extract(&self, elements: &[usize]) -> Result<(PolyMesh, Vec<u32>), MeshError> {
+        let mut new_id = vec![u32::MAX; self.nodes.len()];
+        let mut nodes = Vec::new();
+        for &e in elements {
+            for &v in &self.elements[e].nodes {
+                if new_id[v as usize] == u32::MAX {
+                    new_id[v as usize] = nodes.len() as u32;
+                    nodes.push(self.nodes[v as usize]);
+                }
+            }
+        }
+        let cells: Vec<Cell> = elements
+            .iter()
+            .map(|&e| {
+                Cell::Polyhedron(
+                    self.elements[e]
+                        .faces
+                        .iter()
+                        .map(|r| self.faces[r.face as usize].vertices.iter().map(|&v| new_id[v as usize]).collect())
+                        .collect(),
+                )
+            })
+            .collect();
+        Ok((PolyMesh::from_cells(nodes, &cells)?, new_id))
+    }
+
     /// Total area of the faces that bound exactly one element (m^2).
     pub fn boundary_area(&self) -> f64 {
         let mut users = vec![0u8; self.faces.len()];

@@ -1,5 +1,6 @@
-//! A box cut by random planes: every cell of the plane arrangement is a
-//! convex element (the meshes of wicke2007 Fig. 2).
+//! Random convex cells: a box cut by random planes into many convex
+//! elements (the meshes of wicke2007 Fig. 2), or clipped by random planes
+//! into one convex element (Fig. 1).
 
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -13,21 +14,43 @@ fn uniform(rng: &mut ChaCha8Rng) -> f64 {
     (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
+/// A uniformly distributed unit vector.
+fn direction(rng: &mut ChaCha8Rng) -> [f64; 3] {
+    let z = 2.0 * uniform(rng) - 1.0;
+    let phi = 2.0 * std::f64::consts::PI * uniform(rng);
+    let r = (1.0 - z * z).sqrt();
+    [r * phi.cos(), r * phi.sin(), z]
+}
+
 /// The box `[min, max]` (one hexahedron) split by `planes` planes, each
 /// through a uniform random point of the box with a uniform random
 /// direction. Reproducible from `seed` (ChaCha8).
 pub fn random_convex(min: [f64; 3], max: [f64; 3], planes: usize, seed: u64) -> Result<PolyMesh, crate::Error> {
     let mut mesh = box_hex(min, max, [1, 1, 1])?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let opts = SplitOptions::default();
     for _ in 0..planes {
         let point = [0, 1, 2].map(|d| min[d] + uniform(&mut rng) * (max[d] - min[d]));
-        // uniform direction: normalised Gaussian-free sampling on the sphere
-        let z = 2.0 * uniform(&mut rng) - 1.0;
-        let phi = 2.0 * std::f64::consts::PI * uniform(&mut rng);
-        let r = (1.0 - z * z).sqrt();
-        let normal = [r * phi.cos(), r * phi.sin(), z];
-        split_by_plane(&mut mesh, &Plane { point, normal }, &opts)?;
+        let normal = direction(&mut rng);
+        split_by_plane(&mut mesh, &Plane { point, normal }, &SplitOptions::default())?;
     }
     Ok(mesh)
+}
+
+/// One convex element: the box `[min, max]` clipped by `planes` random
+/// planes at 60 to 95 % of the half extent from the centre (keeping the
+/// centre's side), so vertices and faces multiply while the element stays
+/// round. Reproducible from `seed`.
+pub fn clipped_box(min: [f64; 3], max: [f64; 3], planes: usize, seed: u64) -> Result<PolyMesh, crate::Error> {
+    let mut mesh = box_hex(min, max, [1, 1, 1])?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let centre: [f64; 3] = std::array::from_fn(|d| 0.5 * (min[d] + max[d]));
+    for _ in 0..planes {
+        let n = direction(&mut rng);
+        let r = 0.6 + 0.35 * uniform(&mut rng);
+        let point = std::array::from_fn(|d| centre[d] + r * 0.5 * (max[d] - min[d]) * n[d]);
+        let normal = n.map(|x| -x);
+        // the positive part keeps element id 0 and contains the centre
+        split_by_plane(&mut mesh, &Plane { point, normal }, &SplitOptions::default())?;
+    }
+    Ok(mesh.extract(&[0])?.0)
 }

@@ -6,7 +6,7 @@ use std::time::Instant;
 use super::{BoxElement, Generator, LoadedScene, Mode, Quadrature};
 use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
-use crate::meshing::{box_hex, box_tet, random_convex};
+use crate::meshing::{box_hex, box_tet, clipped_box, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{FixedRegion, Simulation, SimulationParams};
 use crate::store::{BasisOptions, QuadratureRule};
@@ -35,6 +35,9 @@ impl LoadedScene {
             (Some(Generator::Box), Some(BoxElement::Tet)) => Ok(box_tet(min, max, m.cells.unwrap_or([1; 3]))?),
             (Some(Generator::Box), Some(BoxElement::RandomConvex)) => {
                 random_convex(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(1))
+            }
+            (Some(Generator::Box), Some(BoxElement::Clipped)) => {
+                clipped_box(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(0))
             }
             _ => Err(self.invalid("mesh", "…", "needs mesh.file or a generator with an element kind").into()),
         }

@@ -81,6 +81,8 @@ pub enum BoxElement {
     Tet,
     /// The box cut by random planes into convex cells.
     RandomConvex,
+    /// The box clipped by random planes into one convex element.
+    Clipped,
 }
 
 /// `[meshing]` for surface input.
@@ -407,10 +409,10 @@ impl Scene {
                         return Err(s.invalid(
                             "mesh",
                             "box",
-                            "a box generator needs element = \"hex\" | \"tet\" | \"random-convex\"",
+                            "a box generator needs element = \"hex\" | \"tet\" | \"random-convex\" | \"clipped\"",
                         ))
                     }
-                    Some(BoxElement::RandomConvex) => {
+                    Some(BoxElement::RandomConvex | BoxElement::Clipped) => {
                         let planes = m.planes.unwrap_or(8);
                         if planes > 10_000 {
                             return Err(s.invalid("mesh.planes", planes, "must be at most 10000"));
