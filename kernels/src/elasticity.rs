@@ -12,8 +12,6 @@
 //! which is exactly `w B_a^T C B_b` with the 6x6 Voigt matrix `C` of
 //! [`voigt_matrix`]; a test checks the two against each other.
 
-use crate::lanes::{Lanes, Real};
-
 /// Lamé parameters `(λ, μ)` in Pa from Young's modulus `E` (Pa) and Poisson's
 /// ratio `ν` (dimensionless, `-1 < ν < 1/2`).
 #[inline]
@@ -117,20 +115,19 @@ impl pulp::WithSimd for Gram<'_> {
     fn with_simd<S: pulp::Simd>(self, simd: S) {
         let Gram { grad, weights, n, gram } = self;
         let nq = weights.len();
-        let width = Lanes::<S>::WIDTH;
+        let (w_head, w_tail) = S::as_simd_f64s(weights);
         for r in 0..n {
-            let gr = &grad[r * nq..(r + 1) * nq];
+            let (a_head, a_tail) = S::as_simd_f64s(&grad[r * nq..(r + 1) * nq]);
             for c in r..n {
-                let gc = &grad[c * nq..(c + 1) * nq];
-                let mut acc = Lanes::splat(simd, 0.0);
-                for q0 in (0..nq).step_by(width) {
-                    let e = (q0 + width).min(nq);
-                    let w = Lanes::load(simd, &weights[q0..e]);
-                    let a = Lanes::load(simd, &gr[q0..e]);
-                    let b = Lanes::load(simd, &gc[q0..e]);
-                    acc = (w * a).mul_add(b, acc);
+                let (b_head, b_tail) = S::as_simd_f64s(&grad[c * nq..(c + 1) * nq]);
+                let mut acc = simd.splat_f64s(0.0);
+                for ((w, a), b) in w_head.iter().zip(a_head).zip(b_head) {
+                    acc = simd.mul_add_e_f64s(simd.mul_f64s(*w, *a), *b, acc);
                 }
-                let v = acc.reduce_sum();
+                let mut v = simd.reduce_sum_f64s(acc);
+                for ((w, a), b) in w_tail.iter().zip(a_tail).zip(b_tail) {
+                    v += w * a * b;
+                }
                 gram[r * n + c] = v;
                 gram[c * n + r] = v;
             }

@@ -116,13 +116,19 @@ impl<S: Simd> Lanes<S> {
     /// Loads up to `WIDTH` values, padding with zeros.
     #[inline(always)]
     pub fn load(simd: S, values: &[f64]) -> Self {
-        Lanes { v: simd.partial_load_f64s(values), simd }
+        match S::as_simd_f64s(values).0.first() {
+            Some(&v) => Lanes { v, simd },
+            None => Lanes { v: simd.partial_load_f64s(values), simd },
+        }
     }
 
     /// Stores up to `WIDTH` lanes into `out`.
     #[inline(always)]
     pub fn store(self, out: &mut [f64]) {
-        self.simd.partial_store_f64s(out, self.v)
+        match S::as_mut_simd_f64s(out).0.first_mut() {
+            Some(v) => *v = self.v,
+            None => self.simd.partial_store_f64s(out, self.v),
+        }
     }
 
     /// The same value in every lane.
