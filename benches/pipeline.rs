@@ -30,8 +30,7 @@ fn pipeline(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("assembly", n), |b| {
             b.iter(|| {
                 values.fill(0.0);
-                pattern
-                    .assemble(&store, &mut values, |bi, i, o| o.copy_from_slice(store.batches[bi].element_stiffness(i)))
+                pattern.assemble(&mut values, |b, i, a, c| store.batches[b].block(i, a, c))
             })
         });
         for d in 0..3 * mesh.nodes.len() {

@@ -23,6 +23,8 @@
 // `!(x > 0.0)` is how this crate rejects NaN together with out-of-range
 // values; `partial_cmp` would hide that intent.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Index loops mirror the formulas (rows, columns, components).
+#![allow(clippy::needless_range_loop)]
 
 pub mod assembly;
 pub mod bench;
@@ -63,6 +65,9 @@ pub enum Error {
     /// A linear solve failed.
     #[error("solve failed: {0}")]
     Solve(#[from] solve::SolveError),
+    /// A time step failed.
+    #[error("step {step}: {source}")]
+    Step { step: usize, source: solve::SolveError },
     /// A parameter passed through the API is invalid.
     #[error("invalid parameter: {0}")]
     Parameter(String),

@@ -112,17 +112,22 @@ proptest! {
         let k = p.vertices.len();
         let pts = interior_points(&p, seed);
         let (_, grad) = eval(&p, &pts);
-        let h = 1e-5 * diameter(&p);
+        let h = 1e-4 * diameter(&p);
+        // central differences with one Richardson step: error O(h^4)
+        let central = |x: [f64; 3], i: usize, h: f64| {
+            let (mut xp, mut xm) = (x, x);
+            xp[i] += h;
+            xm[i] -= h;
+            let (fp, _) = eval(&p, &[xp]);
+            let (fm, _) = eval(&p, &[xm]);
+            fp.iter().zip(&fm).map(|(a, b)| (a - b) / (2.0 * h)).collect::<Vec<f64>>()
+        };
         for (q, x) in pts.iter().enumerate() {
             for i in 0..3 {
-                let (mut xp, mut xm) = (*x, *x);
-                xp[i] += h;
-                xm[i] -= h;
-                let (fp, _) = eval(&p, &[xp]);
-                let (fm, _) = eval(&p, &[xm]);
+                let (d1, d2) = (central(*x, i, h), central(*x, i, 0.5 * h));
                 let scale_g = (0..k).map(|a| grad[(3 * a + i) * pts.len() + q].abs()).fold(0.0, f64::max);
                 for a in 0..k {
-                    let fd = (fp[a] - fm[a]) / (2.0 * h);
+                    let fd = (4.0 * d2[a] - d1[a]) / 3.0;
                     let g = grad[(3 * a + i) * pts.len() + q];
                     prop_assert!((fd - g).abs() < 1e-6 * scale_g.max(1e-3), "a {} i {}: fd {} vs {}", a, i, fd, g);
                 }
@@ -147,18 +152,30 @@ proptest! {
     }
 
     #[test]
-    fn values_on_a_face_are_the_triangle_interpolation(p in polyhedron_strategy(), t in 0usize..1000, s in 0.05f64..0.9, r in 0.05f64..0.9) {
+    fn values_on_a_face_are_the_triangle_interpolation(p in polyhedron_strategy(), t in 0usize..1000, w in (0.2f64..1.0, 0.2f64..1.0, 0.2f64..1.0)) {
         let k = p.vertices.len();
         let tri = p.triangles[t % p.triangles.len()];
         let (a, b, c) = (p.vertices[tri[0] as usize], p.vertices[tri[1] as usize], p.vertices[tri[2] as usize]);
-        // barycentric point of the triangle, approached from inside
-        let (l1, l2) = (s * (1.0 - r), s * r);
-        let l0 = 1.0 - l1 - l2;
+        // a barycentric point of the triangle away from its edges (the
+        // approach to the face is uniform only there), approached from inside
+        let sum = w.0 + w.1 + w.2;
+        let (l0, l1, l2) = (w.0 / sum, w.1 / sum, w.2 / sum);
         let on = add(add(scale(a, l0), scale(b, l1)), scale(c, l2));
-        let centroid = scale(p.vertices.iter().fold([0.0; 3], |m, &v| add(m, v)), 1.0 / k as f64);
-        let inward = sub(centroid, on);
-        let x = add(on, scale(inward, 1e-9 / norm(inward) * diameter(&p)));
-        let (phi, _) = eval(&p, &[x]);
+        // the triangles are outward, so the inward normal is -(b - a) × (c - a)
+        let inward = scale(cleave_kernels::vec3::cross(sub(b, a), sub(c, a)), -1.0);
+        // approach the face along its inward normal and extrapolate the
+        // values linearly to the face (offsets of 1e-4 and 2e-4 of the
+        // triangle's in-radius: cut elements carry triangles down to 1e-4 of
+        // the element, and the approach is linear in offset / in-radius)
+        let area2 = norm(cleave_kernels::vec3::cross(sub(b, a), sub(c, a)));
+        let inradius = area2 / (norm(sub(b, a)) + norm(sub(c, b)) + norm(sub(a, c)));
+        let offset = |d: f64| eval(&p, &[add(on, scale(inward, d * inradius / norm(inward)))]).0;
+        // sliver triangles (from snapped cuts, in-radius down to 1e-6 of the
+        // element) cannot be approached closer than rounding allows; the
+        // quadrature never comes near them, so they are not tested here
+        prop_assume!(inradius > 1e-3 * diameter(&p));
+        let (near, far) = (offset(1e-4), offset(2e-4));
+        let phi: Vec<f64> = near.iter().zip(&far).map(|(n, f)| 2.0 * n - f).collect();
         let mut want = vec![0.0; k];
         want[tri[0] as usize] += l0;
         want[tri[1] as usize] += l1;

@@ -28,6 +28,8 @@ pub trait Real:
     fn max(self, o: Self) -> Self;
     /// Lane-wise `if self < other { a } else { b }`.
     fn select_less(self, other: Self, a: Self, b: Self) -> Self;
+    /// The largest lane.
+    fn max_lane(self) -> f64;
     /// `self * a + b` (not fused).
     #[inline(always)]
     fn mul_add(self, a: Self, b: Self) -> Self {
@@ -93,6 +95,10 @@ impl Real for f64 {
         } else {
             b
         }
+    }
+    #[inline(always)]
+    fn max_lane(self) -> f64 {
+        self
     }
 }
 
@@ -210,6 +216,10 @@ impl<S: Simd> Real for Lanes<S> {
         let m = self.simd.less_than_f64s(self.v, other.v);
         Lanes { v: self.simd.select_f64s(m, a.v, b.v), simd: self.simd }
     }
+    #[inline(always)]
+    fn max_lane(self) -> f64 {
+        self.simd.reduce_max_f64s(self.v)
+    }
 }
 
 /// A forward dual number: a value and its gradient with respect to a point
@@ -314,6 +324,10 @@ impl<R: Real> Real for Dual<R> {
     #[inline(always)]
     fn max(self, o: Self) -> Self {
         self.select_less(o, o, self)
+    }
+    #[inline(always)]
+    fn max_lane(self) -> f64 {
+        self.v.max_lane()
     }
     #[inline(always)]
     fn select_less(self, other: Self, a: Self, b: Self) -> Self {

@@ -12,9 +12,14 @@
 //! - strain and stress use the Voigt order of wicke2007 eq. 3:
 //!   `[xx, yy, zz, xy, xz, yz]` with engineering shear strains (`2 e_xy`).
 
+// Index loops mirror the formulas (rows, columns, components) in numeric
+// kernels; iterator chains would hide them.
+#![allow(clippy::needless_range_loop)]
+
 pub mod elasticity;
 pub mod lanes;
 pub mod mean_value;
 pub mod quadrature;
+pub mod rotation;
 pub mod tet;
 pub mod vec3;

@@ -8,10 +8,10 @@
 //! matrix stores both triangles (it is symmetric): the Cholesky solver reads
 //! the lower one, matrix-vector products read it as compressed rows.
 //!
-//! Assembly is parallel and deterministic: elements of a batch are coloured
-//! so that no two elements of one colour share a block; colours run one after
-//! another, elements within a colour in parallel. Every matrix entry thus
-//! receives its contributions in the same order whatever the thread count.
+//! Assembly is parallel and deterministic: each node gathers, in a fixed
+//! order, the blocks of the elements around it into its own columns (see
+//! [`SparsePattern`]), so every matrix entry receives its contributions in
+//! the same order whatever the thread count, without locks or atomics.
 
 mod constraints;
 mod pattern;

@@ -1,5 +1,6 @@
 //! Running a scene end to end: mesh, simulation, frames, summary.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -8,7 +9,7 @@ use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_tet, clipped_box, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
-use crate::sim::{FixedRegion, Simulation, SimulationParams};
+use crate::sim::{Collider, FixedRegion, Simulation, SimulationParams};
 use crate::store::{BasisOptions, QuadratureRule};
 use crate::Error;
 
@@ -55,7 +56,8 @@ impl LoadedScene {
         }
     }
 
-    /// Builds the simulation: mesh, material, fixed regions.
+    /// Builds the simulation: mesh, material, solver, fixed regions,
+    /// colliders and initial velocity.
     pub fn build_simulation(&self) -> Result<Simulation, Error> {
         let mesh = self.build_mesh()?;
         let s = &self.scene;
@@ -63,8 +65,19 @@ impl LoadedScene {
             Quadrature::Consistent => QuadratureRule::Consistent,
             Quadrature::Paper => QuadratureRule::Paper,
         };
-        let basis = BasisOptions { quadrature };
-        let params = SimulationParams { material: s.material(), gravity: s.simulation.gravity, basis };
+        let sim_spec = &s.simulation;
+        let params = SimulationParams {
+            material: s.material(),
+            gravity: sim_spec.gravity,
+            basis: BasisOptions { quadrature },
+            dt: sim_spec.dt,
+            mass_damping: sim_spec.damping.mass,
+            stiffness_damping: sim_spec.damping.stiffness,
+            corotated: sim_spec.corotated,
+            solver: s.solver.kind,
+            tolerance: s.solver.tolerance,
+            max_iterations: s.solver.max_iterations,
+        };
         let mut sim = Simulation::new(mesh, params)?;
         for f in &s.fixed {
             sim.fix(FixedRegion {
@@ -74,12 +87,31 @@ impl LoadedScene {
                 gradient: f.gradient,
             })?;
         }
+        for c in &s.collider {
+            sim.add_collider(Collider::new(c.plane.point, c.plane.normal, c.stiffness)?);
+        }
+        if sim_spec.velocity != [0.0; 3] {
+            let v = vec![sim_spec.velocity; sim.mesh().nodes.len()];
+            sim.set_velocities(&v)?;
+        }
         Ok(sim)
     }
 }
 
-/// Runs a scene: builds it, solves, writes frames and `summary.json` into the
-/// output folder, and returns the summary.
+/// A progress bar over `steps`, drawn only on a terminal.
+fn progress(steps: usize) -> indicatif::ProgressBar {
+    if !std::io::stderr().is_terminal() || steps < 2 {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(steps as u64);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {per_sec}  eta {eta}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// Runs a scene: builds it, solves or steps it, writes frames and
+/// `summary.json` into the output folder, and returns the summary.
 pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Error> {
     let started = Instant::now();
     let dir = scene.output_dir(opts);
@@ -88,19 +120,34 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
     let s = &scene.scene;
     let mut stats = Vec::new();
     let mut frames = 0;
+    let mut write = |sim: &mut Simulation, index: usize| -> Result<(), Error> {
+        let t = Instant::now();
+        write_frame(&dir, index, sim, &s.output.formats)?;
+        sim.record_output_time(t.elapsed().as_secs_f64());
+        frames += 1;
+        Ok(())
+    };
     let steps = match s.simulation.mode {
         Mode::Static => {
             stats.push(sim.solve_static()?);
+            write(&mut sim, 0)?;
             1
         }
         Mode::Dynamic => {
-            return Err(scene.unsupported("simulation.mode", "dynamic simulation is not implemented yet").into())
+            let steps = opts.steps.unwrap_or(s.simulation.steps);
+            write(&mut sim, 0)?;
+            let bar = progress(steps);
+            for step in 1..=steps {
+                stats.push(sim.step()?.solve);
+                if step % s.output.every == 0 {
+                    write(&mut sim, step / s.output.every)?;
+                }
+                bar.inc(1);
+            }
+            bar.finish_and_clear();
+            steps
         }
     };
-    let t = Instant::now();
-    write_frame(&dir, 0, &sim, &s.output.formats)?;
-    frames += 1;
-    sim.record_output_time(t.elapsed().as_secs_f64());
     let adjacency = sim.mesh().adjacency();
     let (_, components) = adjacency.element_components(sim.mesh());
     let max_displacement =
@@ -117,7 +164,7 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
         steps,
         wall_time: wall,
         wall_time_total: total,
-        ms_per_step: 1e3 * (wall.assembly + wall.solve) / steps as f64,
+        ms_per_step: 1e3 * (wall.rotation + wall.assembly + wall.solve) / steps.max(1) as f64,
         max_displacement,
         elastic_energy: sim.elastic_energy(),
         kinetic_energy: sim.kinetic_energy(),

@@ -4,6 +4,7 @@ use serde::Deserialize;
 
 use super::{LoadedScene, SceneError};
 use crate::material::Material;
+pub use crate::solve::SolverKind;
 
 /// A whole scene.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -188,6 +189,9 @@ pub struct SimulationSpec {
     /// Rayleigh damping.
     #[serde(default)]
     pub damping: DampingSpec,
+    /// Initial velocity of every node (m/s).
+    #[serde(default)]
+    pub velocity: [f64; 3],
 }
 
 fn default_dt() -> f64 {
@@ -212,6 +216,7 @@ impl Default for SimulationSpec {
             gravity: default_gravity(),
             corotated: true,
             damping: DampingSpec::default(),
+            velocity: [0.0; 3],
         }
     }
 }
@@ -249,6 +254,13 @@ pub struct SolverSpec {
     /// Relative residual tolerance of iterative solvers.
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
+    /// Iteration cap of iterative solvers.
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: usize,
+}
+
+fn default_max_iterations() -> usize {
+    2000
 }
 
 fn default_tolerance() -> f64 {
@@ -257,19 +269,12 @@ fn default_tolerance() -> f64 {
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec { kind: SolverKind::Cholesky, tolerance: default_tolerance() }
+        SolverSpec {
+            kind: SolverKind::Cholesky,
+            tolerance: default_tolerance(),
+            max_iterations: default_max_iterations(),
+        }
     }
-}
-
-/// Linear solvers.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SolverKind {
-    /// Sparse Cholesky.
-    #[default]
-    Cholesky,
-    /// Preconditioned conjugate gradients.
-    Cg,
 }
 
 /// An axis-aligned box.
@@ -465,16 +470,17 @@ impl Scene {
                 ));
             }
         }
-        if sim.mode == Mode::Dynamic {
-            return Err(
-                s.unsupported("simulation.mode", "dynamic simulation is not implemented yet; use mode = \"static\"")
-            );
+        if !finite3(&sim.velocity) {
+            return Err(s.invalid("simulation.velocity", format!("{:?}", sim.velocity), "must be finite (m/s)"));
+        }
+        if sim.steps > 10_000_000 {
+            return Err(s.invalid("simulation.steps", sim.steps, "must be at most 1e7"));
         }
         if !(self.solver.tolerance > 0.0 && self.solver.tolerance < 1.0) {
             return Err(s.invalid("solver.tolerance", self.solver.tolerance, "must lie in (0, 1)"));
         }
-        if self.solver.kind == SolverKind::Cg {
-            return Err(s.unsupported("solver.kind", "the CG solver is not implemented yet; use kind = \"cholesky\""));
+        if self.solver.max_iterations == 0 {
+            return Err(s.invalid("solver.max_iterations", 0, "must be at least 1"));
         }
         for (i, f) in self.fixed.iter().enumerate() {
             let b = &f.region;
@@ -496,8 +502,23 @@ impl Scene {
                 return Err(s.invalid(&format!("fixed.{i}.gradient"), format!("{:?}", f.gradient), "must be finite"));
             }
         }
-        if !self.collider.is_empty() {
-            return Err(s.unsupported("collider", "collisions are not implemented yet"));
+        for (i, c) in self.collider.iter().enumerate() {
+            let n = c.plane.normal;
+            if !finite3(&c.plane.point) || !finite3(&n) || n.iter().all(|&x| x == 0.0) {
+                let plane = format!("{:?}", c.plane);
+                return Err(s.invalid(
+                    &format!("collider.{i}.plane"),
+                    plane,
+                    "needs a finite point and a non-zero normal",
+                ));
+            }
+            if !(c.stiffness >= 0.0 && c.stiffness.is_finite()) {
+                return Err(s.invalid(
+                    &format!("collider.{i}.stiffness"),
+                    c.stiffness,
+                    "must be a finite number >= 0 (N/m)",
+                ));
+            }
         }
         if !self.cut.is_empty() {
             return Err(s.unsupported("cut", "cutting is not implemented yet"));

@@ -11,11 +11,17 @@
 //! assert!(stats.residual < 1e-8);
 //! let tip = sim.displacements().iter().map(|u| u[2]).fold(0.0, f64::min);
 //! assert!(tip < -1.0); // the beam sags under its own weight
+//! for _ in 0..3 {
+//!     sim.step()?; // implicit Euler, corotated, from the static state
+//! }
+//! assert!(sim.kinetic_energy().is_finite());
 //! # Ok::<(), cleave::Error>(())
 //! ```
 
+mod corotation;
 mod timings;
 
+pub use corotation::Corotation;
 pub use timings::{Phase, PhaseTimings};
 
 use cleave_kernels::elasticity::{stress, von_mises};
@@ -23,7 +29,7 @@ use cleave_kernels::elasticity::{stress, von_mises};
 use crate::assembly::{Constraints, SparsePattern};
 use crate::material::Material;
 use crate::mesh::PolyMesh;
-use crate::solve::{solve_checked, Cholesky, LinearSolver, SolveStats};
+use crate::solve::{make_solver, solve_checked, LinearSolver, SolveStats, SolverKind};
 use crate::store::{BasisOptions, ElementStore};
 use crate::Error;
 
@@ -36,6 +42,22 @@ pub struct SimulationParams {
     pub gravity: [f64; 3],
     /// Basis construction options (quadrature of mean value elements).
     pub basis: BasisOptions,
+    /// Time step (s).
+    pub dt: f64,
+    /// Rayleigh damping `D = mass_damping M + stiffness_damping K`
+    /// (1/s and s).
+    pub mass_damping: f64,
+    /// See `mass_damping`.
+    pub stiffness_damping: f64,
+    /// Stiffness warping (corotated elasticity); `false` is plain linear
+    /// elasticity, which shows ghost forces under rotation.
+    pub corotated: bool,
+    /// The linear solver of a step.
+    pub solver: SolverKind,
+    /// Relative residual of the iterative solver.
+    pub tolerance: f64,
+    /// Iteration cap of the iterative solver.
+    pub max_iterations: usize,
 }
 
 impl Default for SimulationParams {
@@ -44,6 +66,13 @@ impl Default for SimulationParams {
             material: Material { young: 1e5, poisson: 0.3, density: 1000.0 },
             gravity: [0.0, 0.0, -9.81],
             basis: BasisOptions::default(),
+            dt: 0.01,
+            mass_damping: 0.0,
+            stiffness_damping: 0.0,
+            corotated: true,
+            solver: SolverKind::Cholesky,
+            tolerance: 1e-8,
+            max_iterations: 2000,
         }
     }
 }
@@ -78,6 +107,47 @@ impl FixedRegion {
     }
 }
 
+/// A penalty collision plane: nodes behind it are pushed out with force
+/// `stiffness · depth` along its normal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Collider {
+    /// A point on the plane (m).
+    pub point: [f64; 3],
+    /// Unit normal, pointing into the free half-space.
+    pub normal: [f64; 3],
+    /// Penalty stiffness (N/m).
+    pub stiffness: f64,
+}
+
+impl Collider {
+    /// A plane collider; the normal is normalised, values are checked.
+    pub fn new(point: [f64; 3], normal: [f64; 3], stiffness: f64) -> Result<Self, Error> {
+        let len = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();
+        if !(len > 0.0) || !len.is_finite() || !point.iter().all(|v| v.is_finite()) || !(stiffness >= 0.0) {
+            return Err(Error::Parameter(format!(
+                "collider plane needs a finite point, a non-zero normal and stiffness >= 0 (got {point:?}, {normal:?}, {stiffness})"
+            )));
+        }
+        Ok(Collider { point, normal: normal.map(|x| x / len), stiffness })
+    }
+
+    /// Penetration depth of position `x` (m, positive behind the plane).
+    pub fn depth(&self, x: [f64; 3]) -> f64 {
+        (0..3).map(|i| (self.point[i] - x[i]) * self.normal[i]).sum()
+    }
+}
+
+/// What one time step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepStats {
+    /// The linear solve.
+    pub solve: SolveStats,
+    /// Largest number of rotation iterations of an element group.
+    pub rotation_iterations: usize,
+    /// Nodes in contact with a collider.
+    pub contacts: usize,
+}
+
 /// One elastic body: mesh, element data, state and solver.
 pub struct Simulation {
     mesh: PolyMesh,
@@ -87,18 +157,34 @@ pub struct Simulation {
     masses: Vec<f64>,
     fixed: Vec<FixedRegion>,
     pinned: std::collections::BTreeMap<u32, [f64; 3]>,
+    colliders: Vec<Collider>,
     displacement: Vec<[f64; 3]>,
     velocity: Vec<[f64; 3]>,
+    corotation: Corotation,
     solver: Box<dyn LinearSolver>,
+    analysed: bool,
+    values: Vec<f64>,
+    steps: usize,
     timings: PhaseTimings,
 }
 
 impl Simulation {
-    /// Validates `mesh` and builds the element store and the sparse pattern.
+    /// Validates `mesh` and the parameters, builds the element store and the
+    /// sparse pattern.
     pub fn new(mesh: PolyMesh, params: SimulationParams) -> Result<Self, Error> {
         Material::new(params.material.young, params.material.poisson, params.material.density)?;
         if !params.gravity.iter().all(|g| g.is_finite()) {
             return Err(Error::Parameter(format!("gravity {:?} must be finite", params.gravity)));
+        }
+        if !(params.dt > 0.0 && params.dt.is_finite()) {
+            return Err(Error::Parameter(format!("time step {} must be a finite number > 0 (s)", params.dt)));
+        }
+        let (a, b) = (params.mass_damping, params.stiffness_damping);
+        if !(a >= 0.0 && b >= 0.0 && (a + b).is_finite()) {
+            return Err(Error::Parameter("Rayleigh damping coefficients must be finite and >= 0".into()));
+        }
+        if !(params.tolerance > 0.0 && params.tolerance < 1.0) {
+            return Err(Error::Parameter(format!("solver tolerance {} must lie in (0, 1)", params.tolerance)));
         }
         mesh.validate()?;
         let mut timings = PhaseTimings::default();
@@ -106,6 +192,9 @@ impl Simulation {
         let pattern = timings.time(Phase::Assembly, || SparsePattern::build(mesh.nodes.len(), &store));
         let masses = store.lumped_masses(mesh.nodes.len(), params.material.density);
         let n = mesh.nodes.len();
+        let corotation = Corotation::new(&store);
+        let solver = make_solver(params.solver, params.tolerance, params.max_iterations);
+        let values = vec![0.0; pattern.nnz()];
         Ok(Simulation {
             mesh,
             params,
@@ -114,9 +203,14 @@ impl Simulation {
             masses,
             fixed: Vec::new(),
             pinned: Default::default(),
+            colliders: Vec::new(),
             displacement: vec![[0.0; 3]; n],
             velocity: vec![[0.0; 3]; n],
-            solver: Box::new(Cholesky::default()),
+            corotation,
+            solver,
+            analysed: false,
+            values,
+            steps: 0,
             timings,
         })
     }
@@ -151,6 +245,34 @@ impl Simulation {
     /// Releases a pinned node (no effect if it was not pinned).
     pub fn unpin(&mut self, node: usize) {
         self.pinned.remove(&(node as u32));
+    }
+
+    /// Adds a penalty collision plane.
+    pub fn add_collider(&mut self, collider: Collider) {
+        self.colliders.push(collider);
+    }
+
+    /// Sets nodal velocities (m/s), e.g. an initial spin.
+    pub fn set_velocities(&mut self, v: &[[f64; 3]]) -> Result<(), Error> {
+        if v.len() != self.velocity.len() || !v.iter().flatten().all(|x| x.is_finite()) {
+            return Err(Error::Parameter(format!("need {} finite velocities", self.velocity.len())));
+        }
+        self.velocity.copy_from_slice(v);
+        Ok(())
+    }
+
+    /// Sets nodal displacements (m), e.g. a rigidly rotated start.
+    pub fn set_displacements(&mut self, u: &[[f64; 3]]) -> Result<(), Error> {
+        if u.len() != self.displacement.len() || !u.iter().flatten().all(|x| x.is_finite()) {
+            return Err(Error::Parameter(format!("need {} finite displacements", self.displacement.len())));
+        }
+        self.displacement.copy_from_slice(u);
+        Ok(())
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &SimulationParams {
+        &self.params
     }
 
     /// The mesh (rest configuration).
@@ -188,6 +310,16 @@ impl Simulation {
         &self.masses
     }
 
+    /// Steps taken so far.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Simulated time (s).
+    pub fn time(&self) -> f64 {
+        self.steps as f64 * self.params.dt
+    }
+
     /// Wall time spent per phase so far.
     pub fn timings(&self) -> &PhaseTimings {
         &self.timings
@@ -198,27 +330,39 @@ impl Simulation {
         self.timings.add(Phase::Output, seconds);
     }
 
-    /// Von Mises stress of every element at its stress point (Pa).
+    /// Von Mises stress of every element (Pa): of the corotated mean strain
+    /// `sym(Rᵀ F) - I` with the rotations of the last step (identity before
+    /// the first step and in static solves).
     pub fn von_mises(&self) -> Vec<f64> {
         let (l, m) = self.params.material.lame();
-        self.store.displacement_gradients(&self.displacement).into_iter().map(|g| von_mises(stress(g, l, m))).collect()
-    }
-
-    /// Elastic energy `½ uᵀ K u` (J) of the current displacement.
-    pub fn elastic_energy(&self) -> f64 {
-        let mut e = 0.0;
-        for b in &self.store.batches {
-            let k = b.k;
+        let x = self.positions();
+        let mut out = vec![0.0; self.mesh.elements.len()];
+        for (bi, b) in self.store.batches.iter().enumerate() {
             for i in 0..b.len() {
-                let ke = b.element_stiffness(i);
-                let u: Vec<f64> = b.element_nodes(i).iter().flat_map(|&v| self.displacement[v as usize]).collect();
-                for r in 0..3 * k {
-                    let row = &ke[r * 3 * k..(r + 1) * 3 * k];
-                    e += 0.5 * u[r] * row.iter().zip(&u).map(|(a, b)| a * b).sum::<f64>();
+                let r = self.corotation.rotation(bi, i);
+                let mut g = [[0.0; 3]; 3];
+                for a in 0..b.k {
+                    let (xa, ga) = (x[b.nodes[i * b.k + a] as usize], b.stress_grads[i * b.k + a]);
+                    // Rᵀ x_a ⊗ g_a
+                    let l = [0, 1, 2].map(|p| r[p] * xa[0] + r[3 + p] * xa[1] + r[6 + p] * xa[2]);
+                    for p in 0..3 {
+                        for q in 0..3 {
+                            g[p][q] += l[p] * ga[q];
+                        }
+                    }
                 }
+                for (p, row) in g.iter_mut().enumerate() {
+                    row[p] -= 1.0;
+                }
+                out[b.elements[i] as usize] = von_mises(stress(g, l, m));
             }
         }
-        e
+        out
+    }
+
+    /// Elastic energy (J) with the rotations of the last step.
+    pub fn elastic_energy(&self) -> f64 {
+        self.corotation.energy(&self.store, &self.positions())
     }
 
     /// Kinetic energy `½ Σ m_i |v_i|²` (J).
@@ -226,11 +370,41 @@ impl Simulation {
         self.masses.iter().zip(&self.velocity).map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
     }
 
-    /// The Dirichlet constraints of the current fixed regions; nodes that
-    /// belong to no element are held at rest so the system stays regular.
-    fn constraints(&self) -> Constraints {
+    /// Linear momentum `Σ m_i v_i` (kg m/s).
+    pub fn linear_momentum(&self) -> [f64; 3] {
+        let mut p = [0.0; 3];
+        for (m, v) in self.masses.iter().zip(&self.velocity) {
+            (0..3).for_each(|i| p[i] += m * v[i]);
+        }
+        p
+    }
+
+    /// Angular momentum `Σ m_i x_i × v_i` about the origin (kg m²/s).
+    pub fn angular_momentum(&self) -> [f64; 3] {
+        let mut l = [0.0; 3];
+        for ((m, x), v) in self.masses.iter().zip(self.positions()).zip(&self.velocity) {
+            let c = cleave_kernels::vec3::cross(x, *v);
+            (0..3).for_each(|i| l[i] += m * c[i]);
+        }
+        l
+    }
+
+    /// Elastic forces on every node at the current positions (N), with
+    /// rotations updated (or the identity when not corotated).
+    pub fn elastic_forces(&mut self) -> Vec<[f64; 3]> {
+        let x = self.positions();
+        self.corotation.update(&self.store, &x, self.params.corotated);
+        let mut f = vec![[0.0; 3]; x.len()];
+        let (store, corotation) = (&self.store, &self.corotation);
+        self.pattern.gather(&mut f, |b, i, a| corotation.force(store, b, i, a));
+        f
+    }
+
+    /// Prescribed displacements: fixed regions, then pins; nodes of no
+    /// element are held at rest so the system stays regular.
+    fn prescribed(&self) -> Vec<Option<[f64; 3]>> {
         let n = self.mesh.nodes.len();
-        let mut c = Constraints::free(3 * n);
+        let mut out = vec![None; n];
         let mut used = vec![false; n];
         for el in &self.mesh.elements {
             for &v in &el.nodes {
@@ -239,43 +413,147 @@ impl Simulation {
         }
         for (i, x) in self.mesh.nodes.iter().enumerate() {
             if !used[i] {
-                (0..3).for_each(|d| c.fix(3 * i + d, 0.0));
-                continue;
-            }
-            if let Some(r) = self.fixed.iter().rev().find(|r| r.contains(*x)) {
-                let u = r.value(*x);
-                (0..3).for_each(|d| c.fix(3 * i + d, u[d]));
+                out[i] = Some(self.displacement[i]);
+            } else if let Some(r) = self.fixed.iter().rev().find(|r| r.contains(*x)) {
+                out[i] = Some(r.value(*x));
             }
         }
         for (&i, u) in &self.pinned {
-            (0..3).for_each(|d| c.fix(3 * i as usize + d, u[d]));
+            out[i as usize] = Some(*u);
         }
-        c
+        out
+    }
+
+    /// Analyses the pattern once per topology.
+    fn ensure_analysed(&mut self) -> Result<(), Error> {
+        if !self.analysed {
+            let t = std::time::Instant::now();
+            self.solver.analyze(self.pattern.symbolic.as_ref())?;
+            self.timings.add(Phase::Solve, t.elapsed().as_secs_f64());
+            self.analysed = true;
+        }
+        Ok(())
+    }
+
+    /// Factors and solves `A x = rhs` for the current `values`, with `x` as
+    /// the warm start.
+    fn solve_system(&mut self, rhs: &[f64], x: &mut [f64]) -> Result<SolveStats, Error> {
+        self.ensure_analysed()?;
+        let matrix = self.pattern.matrix(&self.values);
+        let solver = &mut self.solver;
+        let stats = self.timings.time(Phase::Solve, || -> Result<SolveStats, Error> {
+            solver.factor(matrix)?;
+            Ok(solve_checked(solver.as_mut(), matrix, rhs, x)?)
+        })?;
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(crate::solve::SolveError::NonFinite.into());
+        }
+        Ok(stats)
     }
 
     /// Solves the linear static problem `K u = f_gravity` with the fixed
     /// regions as Dirichlet conditions, and stores `u`.
     pub fn solve_static(&mut self) -> Result<SolveStats, Error> {
-        let n = self.mesh.nodes.len();
-        let mut values = vec![0.0; self.pattern.nnz()];
         let store = &self.store;
+        let values = &mut self.values;
+        let pattern = &self.pattern;
         self.timings.time(Phase::Assembly, || {
-            self.pattern
-                .assemble(store, &mut values, |b, i, out| out.copy_from_slice(store.batches[b].element_stiffness(i)))
+            values.fill(0.0);
+            pattern.assemble(values, |b, i, a, bb| store.batches[b].block(i, a, bb))
         });
         let g = self.params.gravity;
         let mut rhs: Vec<f64> = self.masses.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
-        let constraints = self.constraints();
-        constraints.apply(&self.pattern, &mut values, &mut rhs);
-        let matrix = self.pattern.matrix(&values);
-        let mut x = vec![0.0; 3 * n];
-        let solver = &mut self.solver;
-        let stats = self.timings.time(Phase::Solve, || -> Result<SolveStats, Error> {
-            solver.analyze(self.pattern.symbolic.as_ref())?;
-            solver.factor(matrix)?;
-            Ok(solve_checked(solver.as_mut(), matrix, &rhs, &mut x)?)
-        })?;
+        let mut constraints = Constraints::free(rhs.len());
+        for (i, p) in self.prescribed().iter().enumerate() {
+            if let Some(u) = p {
+                (0..3).for_each(|d| constraints.fix(3 * i + d, u[d]));
+            }
+        }
+        constraints.apply(&self.pattern, &mut self.values, &mut rhs);
+        let mut x = vec![0.0; rhs.len()];
+        let stats = self.solve_system(&rhs, &mut x)?;
         self.displacement = x.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         Ok(stats)
+    }
+
+    /// Advances one implicit Euler step of corotated elasticity:
+    ///
+    /// ```text
+    /// ((1 + h α) M + (h² + h β) K_R) v⁺ = M v + h (f_gravity + f_elastic(x) + f_contact(x))
+    /// x⁺ = x + h v⁺
+    /// ```
+    ///
+    /// with `K_R` the warped stiffness, `f_elastic = -R K (Rᵀ x - X)`,
+    /// Rayleigh damping `α M + β K_R`, and the penalty contacts linearised
+    /// into the same solve. Prescribed nodes move to their target in one
+    /// step. Errors name the step.
+    pub fn step(&mut self) -> Result<StepStats, Error> {
+        let step = self.steps;
+        self.advance().map_err(|e| match e {
+            Error::Solve(source) => Error::Step { step, source },
+            other => other,
+        })
+    }
+
+    fn advance(&mut self) -> Result<StepStats, Error> {
+        let h = self.params.dt;
+        let n = self.mesh.nodes.len();
+        let x = self.positions();
+        let warp = self.params.corotated;
+        let (store, corotation) = (&self.store, &mut self.corotation);
+        let rotation_iterations = self.timings.time(Phase::Rotation, || corotation.update(store, &x, warp));
+        let c_k = h * h + h * self.params.stiffness_damping;
+        let c_m = 1.0 + h * self.params.mass_damping;
+        let mut force = vec![[0.0; 3]; n];
+        {
+            let (pattern, values, corotation) = (&self.pattern, &mut self.values, &self.corotation);
+            self.timings.time(Phase::Assembly, || {
+                values.fill(0.0);
+                pattern.assemble(values, |b, i, a, bb| corotation.block(store, b, i, a, bb).map(|v| c_k * v));
+                pattern.gather(&mut force, |b, i, a| corotation.force(store, b, i, a));
+            });
+        }
+        let g = self.params.gravity;
+        let mut rhs = vec![0.0; 3 * n];
+        for i in 0..n {
+            let m = self.masses[i];
+            for d in 0..3 {
+                let slot = self.pattern.diagonal_slot(3 * i + d);
+                self.values[slot] += c_m * m;
+                rhs[3 * i + d] = m * self.velocity[i][d] + h * (m * g[d] + force[i][d]);
+            }
+        }
+        let mut contacts = 0;
+        for c in &self.colliders {
+            for (i, xi) in x.iter().enumerate() {
+                let depth = c.depth(*xi);
+                if depth > 0.0 {
+                    contacts += 1;
+                    for r in 0..3 {
+                        rhs[3 * i + r] += h * c.stiffness * depth * c.normal[r];
+                        for col in 0..3 {
+                            let slot = self.pattern.block_slot(i, r, col);
+                            self.values[slot] += h * h * c.stiffness * c.normal[r] * c.normal[col];
+                        }
+                    }
+                }
+            }
+        }
+        let mut constraints = Constraints::free(3 * n);
+        for (i, p) in self.prescribed().iter().enumerate() {
+            if let Some(u) = p {
+                (0..3).for_each(|d| constraints.fix(3 * i + d, (u[d] - self.displacement[i][d]) / h));
+            }
+        }
+        constraints.apply(&self.pattern, &mut self.values, &mut rhs);
+        let mut v: Vec<f64> = self.velocity.iter().flatten().copied().collect();
+        let solve = self.solve_system(&rhs, &mut v)?;
+        for i in 0..n {
+            let vi = [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
+            self.velocity[i] = vi;
+            (0..3).for_each(|d| self.displacement[i][d] += h * vi[d]);
+        }
+        self.steps += 1;
+        Ok(StepStats { solve, rotation_iterations, contacts })
     }
 }

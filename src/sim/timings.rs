@@ -7,6 +7,8 @@ use std::time::Instant;
 pub enum Phase {
     /// Basis functions, quadrature and element matrices.
     Basis,
+    /// Element rotations and elastic forces (stiffness warping).
+    Rotation,
     /// Pattern building and global assembly.
     Assembly,
     /// Factorisation and solves.
@@ -22,6 +24,8 @@ pub enum Phase {
 pub struct PhaseTimings {
     /// Basis functions, quadrature and element matrices (s).
     pub basis: f64,
+    /// Rotations and elastic forces (s).
+    pub rotation: f64,
     /// Pattern and assembly (s).
     pub assembly: f64,
     /// Factorisation and solves (s).
@@ -37,6 +41,7 @@ impl PhaseTimings {
     pub fn add(&mut self, phase: Phase, seconds: f64) {
         *match phase {
             Phase::Basis => &mut self.basis,
+            Phase::Rotation => &mut self.rotation,
             Phase::Assembly => &mut self.assembly,
             Phase::Solve => &mut self.solve,
             Phase::Topology => &mut self.topology,
@@ -54,6 +59,6 @@ impl PhaseTimings {
 
     /// Sum over all phases (s).
     pub fn total(&self) -> f64 {
-        self.basis + self.assembly + self.solve + self.topology + self.output
+        self.basis + self.rotation + self.assembly + self.solve + self.topology + self.output
     }
 }

@@ -85,7 +85,12 @@ impl LinearSolver for Cholesky {
         Ok(())
     }
 
-    fn solve(&mut self, b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError> {
+    fn solve(
+        &mut self,
+        _matrix: SparseColMatRef<'_, usize, f64>,
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<SolveStats, SolveError> {
         let par = self.par();
         let (Some(sym), Some(buf), true) = (self.symbolic.as_ref(), self.scratch.as_mut(), self.factored) else {
             return Err(SolveError::NotReady);
@@ -104,15 +109,14 @@ impl LinearSolver for Cholesky {
     }
 }
 
-/// Solves once and reports the true relative residual (for tests and
-/// reports; a step does not pay for it).
+/// Solves and reports the true relative residual.
 pub fn solve_checked(
     solver: &mut dyn LinearSolver,
     a: SparseColMatRef<'_, usize, f64>,
     b: &[f64],
     x: &mut [f64],
 ) -> Result<SolveStats, SolveError> {
-    let mut stats = solver.solve(b, x)?;
+    let mut stats = solver.solve(a, b, x)?;
     stats.residual = relative_residual(a, b, x);
     Ok(stats)
 }

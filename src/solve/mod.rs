@@ -4,8 +4,10 @@
 //! the values whenever they change ([`LinearSolver::factor`]), and then solves
 //! for any number of right-hand sides.
 
+mod cg;
 mod cholesky;
 
+pub use cg::{dot, symmetric_matvec, ConjugateGradient};
 pub use cholesky::{solve_checked, Cholesky};
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -46,23 +48,43 @@ pub trait LinearSolver: Send {
     fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError>;
     /// Takes the current values of the matrix.
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError>;
-    /// Solves `A x = b`; `x` holds a starting guess on entry (used by
-    /// iterative solvers) and the solution on exit.
-    fn solve(&mut self, b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError>;
+    /// Solves `A x = b` for the matrix last given to `factor`; `x` holds a
+    /// starting guess on entry (used by iterative solvers) and the solution
+    /// on exit.
+    fn solve(
+        &mut self,
+        matrix: SparseColMatRef<'_, usize, f64>,
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<SolveStats, SolveError>;
 }
 
-/// Relative residual `|b - A x| / |b|` (0 when `b` is zero and `A x` too).
-pub fn relative_residual(a: SparseColMatRef<'_, usize, f64>, b: &[f64], x: &[f64]) -> f64 {
-    let mut r = b.to_vec();
-    let (sym, val) = a.parts();
-    let (cp, ri) = (sym.col_ptr(), sym.row_idx());
-    for j in 0..x.len() {
-        for p in cp[j]..cp[j + 1] {
-            r[ri[p]] -= val[p] * x[j];
-        }
+/// The solvers a simulation can use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverKind {
+    /// Sparse Cholesky, refactorised whenever the matrix changes.
+    #[default]
+    Cholesky,
+    /// Block-Jacobi preconditioned conjugate gradients, warm-started.
+    Cg,
+}
+
+/// A boxed solver of `kind` (`tolerance` and `max_iterations` apply to CG).
+pub fn make_solver(kind: SolverKind, tolerance: f64, max_iterations: usize) -> Box<dyn LinearSolver> {
+    match kind {
+        SolverKind::Cholesky => Box::new(Cholesky::default()),
+        SolverKind::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
     }
-    let nb = b.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let nr = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+}
+
+/// Relative residual `|b - A x| / |b|` (`|A x|` when `b` is zero) for
+/// symmetric `A` stored in both triangles.
+pub fn relative_residual(a: SparseColMatRef<'_, usize, f64>, b: &[f64], x: &[f64]) -> f64 {
+    let mut r = vec![0.0; b.len()];
+    symmetric_matvec(a, x, &mut r);
+    r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+    let (nb, nr) = (dot(b, b).sqrt(), dot(&r, &r).sqrt());
     if nb > 0.0 {
         nr / nb
     } else {

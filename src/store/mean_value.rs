@@ -128,6 +128,7 @@ pub(super) fn build_batch(
         volume,
         mass_fraction,
         stiffness,
+        lame: material.lame(),
         stress_grads,
         triangles,
         points,

@@ -47,8 +47,11 @@ pub struct Batch {
     pub volume: Vec<f64>,
     /// Lumped mass fraction of each node, `k` per element, summing to 1.
     pub mass_fraction: Vec<f64>,
-    /// Element stiffness (N/m), `9 k^2` per element, row-major `3k x 3k`.
+    /// Element stiffness (N/m), `9 k^2` per element, row-major `3k x 3k`
+    /// (empty for tetrahedra, whose blocks come from their gradients).
     pub stiffness: Vec<f64>,
+    /// Lamé parameters `(λ, μ)` of the batch's material (Pa).
+    pub lame: (f64, f64),
     /// Shape function gradients at the stress point (1/m), `k` per element.
     pub stress_grads: Vec<[f64; 3]>,
     /// Surface triangles in local indices, outward, `2k - 4` per element
@@ -78,10 +81,57 @@ impl Batch {
         &self.nodes[i * self.k..(i + 1) * self.k]
     }
 
-    /// Stiffness of batch entry `i`.
-    pub fn element_stiffness(&self, i: usize) -> &[f64] {
-        let s = 9 * self.k * self.k;
-        &self.stiffness[i * s..(i + 1) * s]
+    /// Whether the batch holds closed-form linear tetrahedra.
+    pub fn is_tet(&self) -> bool {
+        self.stiffness.is_empty()
+    }
+
+    /// The row-major 3x3 block `K_ab` (N/m) of entry `i`: for tetrahedra
+    /// `V (λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a · g_b) I)`, otherwise read from
+    /// the stored `K_e`.
+    #[inline]
+    pub fn block(&self, i: usize, a: usize, b: usize) -> [f64; 9] {
+        let k = self.k;
+        if self.is_tet() {
+            let g = &self.stress_grads[i * k..(i + 1) * k];
+            let mut out = [0.0; 9];
+            cleave_kernels::elasticity::add_block(&mut out, g[a], g[b], self.volume[i], self.lame.0, self.lame.1);
+            return out;
+        }
+        let ke = &self.stiffness[i * 9 * k * k..(i + 1) * 9 * k * k];
+        let n = 3 * k;
+        std::array::from_fn(|rc| ke[(3 * a + rc / 3) * n + 3 * b + rc % 3])
+    }
+
+    /// The dense row-major `3k x 3k` element stiffness `K_e` of entry `i`.
+    pub fn element_matrix(&self, i: usize) -> Vec<f64> {
+        let (k, n) = (self.k, 3 * self.k);
+        let mut ke = vec![0.0; n * n];
+        for a in 0..k {
+            for b in 0..k {
+                let blk = self.block(i, a, b);
+                for r in 0..3 {
+                    ke[(3 * a + r) * n + 3 * b..(3 * a + r) * n + 3 * b + 3].copy_from_slice(&blk[3 * r..3 * r + 3]);
+                }
+            }
+        }
+        ke
+    }
+
+    /// `K_e u` for entry `i` and element-local displacements `u` (`k`
+    /// 3-vectors, m): forces in N.
+    pub fn apply_stiffness(&self, i: usize, u: &[[f64; 3]], out: &mut [[f64; 3]]) {
+        let k = self.k;
+        for (a, o) in out.iter_mut().enumerate().take(k) {
+            let mut f = [0.0; 3];
+            for (b, ub) in u.iter().enumerate().take(k) {
+                let blk = self.block(i, a, b);
+                for r in 0..3 {
+                    f[r] += blk[3 * r] * ub[0] + blk[3 * r + 1] * ub[1] + blk[3 * r + 2] * ub[2];
+                }
+            }
+            *o = f;
+        }
     }
 }
 

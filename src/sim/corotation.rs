@@ -1,0 +1,248 @@
+//! Stiffness warping (corotated linear elasticity) per element.
+//!
+//! For every element: the mean deformation gradient `F = Σ_b x_b ⊗ ḡ_b`
+//! (exact for tetrahedra; the volume average for polyhedra, `ḡ_b` being the
+//! mean shape function gradients), its rotation `R` (polar decomposition,
+//! warm-started from the previous step), the elastic forces
+//!
+//! ```text
+//! f_e = -R K_e (Rᵀ x_e - X_e)                                        [N]
+//! ```
+//!
+//! and, for assembly, the warped blocks `R K_ab Rᵀ`. For tetrahedra
+//! `K_ab = V (λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a·g_b) I)`, so the warped block
+//! is the same formula with rotated gradients `R g_a`, and the force is
+//! `f_a = -V R σ g_a` with `σ = λ tr(ε) I + 2 μ ε`, `ε = sym(Rᵀ F) - I`: no
+//! element matrix is stored or multiplied.
+
+use cleave_kernels::elasticity::add_block;
+use cleave_kernels::rotation::{polar_rotations, rotation_matrix};
+use rayon::prelude::*;
+
+use crate::store::{Batch, ElementStore};
+
+/// Elements per parallel task of the per-element passes.
+const TASK: usize = 256;
+
+/// Per-batch state of the warping.
+#[derive(Clone, Debug, Default)]
+struct BatchState {
+    /// Rotation of each element as a unit quaternion (warm start).
+    quaternion: Vec<[f64; 4]>,
+    /// Rotation matrix of each element (row-major).
+    rotation: Vec<[f64; 9]>,
+    /// Deformation gradient of each element (row-major).
+    gradient: Vec<[f64; 9]>,
+    /// Elastic force on each element node (N), `k` per element.
+    force: Vec<[f64; 3]>,
+    /// Rotated shape function gradients `R g_a` (tetrahedra), `k` per element.
+    rotated_grads: Vec<[f64; 3]>,
+}
+
+/// Rotations, forces and warped blocks of every element.
+#[derive(Clone, Debug, Default)]
+pub struct Corotation {
+    batches: Vec<BatchState>,
+}
+
+#[inline]
+fn mat_vec(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
+    [
+        m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
+        m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
+        m[6] * v[0] + m[7] * v[1] + m[8] * v[2],
+    ]
+}
+
+#[inline]
+fn mat_t_vec(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
+    [
+        m[0] * v[0] + m[3] * v[1] + m[6] * v[2],
+        m[1] * v[0] + m[4] * v[1] + m[7] * v[2],
+        m[2] * v[0] + m[5] * v[1] + m[8] * v[2],
+    ]
+}
+
+impl Corotation {
+    /// Identity rotations for every element of `store`.
+    pub fn new(store: &ElementStore) -> Self {
+        let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        Corotation {
+            batches: store
+                .batches
+                .iter()
+                .map(|b| BatchState {
+                    quaternion: vec![[1.0, 0.0, 0.0, 0.0]; b.len()],
+                    rotation: vec![identity; b.len()],
+                    gradient: vec![identity; b.len()],
+                    force: vec![[0.0; 3]; b.len() * b.k],
+                    rotated_grads: if b.is_tet() { b.stress_grads.clone() } else { Vec::new() },
+                })
+                .collect(),
+        }
+    }
+
+    /// Recomputes rotations (if `warp`; identity otherwise) and elastic
+    /// forces at node positions `x` (m). Returns the largest number of
+    /// rotation iterations.
+    pub fn update(&mut self, store: &ElementStore, x: &[[f64; 3]], warp: bool) -> usize {
+        let mut most = 0;
+        for (b, st) in store.batches.iter().zip(&mut self.batches) {
+            let k = b.k;
+            // 1. deformation gradients
+            st.gradient.par_iter_mut().with_min_len(TASK).enumerate().for_each(|(i, f)| {
+                let mut m = [0.0; 9];
+                for a in 0..k {
+                    let (xa, g) = (x[b.nodes[i * k + a] as usize], b.stress_grads[i * k + a]);
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            m[3 * r + c] += xa[r] * g[c];
+                        }
+                    }
+                }
+                *f = m;
+            });
+            // 2. rotations, SIMD over elements, warm-started
+            if warp {
+                most = most.max(
+                    st.quaternion
+                        .par_chunks_mut(TASK)
+                        .zip(st.gradient.par_chunks(TASK))
+                        .map(|(q, f)| polar_rotations(f, q))
+                        .max()
+                        .unwrap_or(0),
+                );
+                st.rotation.par_iter_mut().zip(&st.quaternion).for_each(|(r, q)| *r = rotation_matrix(*q));
+            }
+            // 3. forces (and rotated gradients of tetrahedra)
+            let (rotation, gradient) = (&st.rotation, &st.gradient);
+            if b.is_tet() {
+                st.force
+                    .par_chunks_mut(k)
+                    .zip(st.rotated_grads.par_chunks_mut(k))
+                    .enumerate()
+                    .with_min_len(TASK)
+                    .for_each(|(i, (f, rg))| tet_forces(b, i, &rotation[i], &gradient[i], f, rg));
+            } else {
+                st.force.par_chunks_mut(k).enumerate().with_min_len(TASK / 8).for_each(|(i, f)| {
+                    let r = &rotation[i];
+                    let u: Vec<[f64; 3]> = (0..k)
+                        .map(|a| {
+                            let (xa, xr) = (x[b.nodes[i * k + a] as usize], b.rest[i * k + a]);
+                            let l = mat_t_vec(r, xa);
+                            [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
+                        })
+                        .collect();
+                    b.apply_stiffness(i, &u, f);
+                    for fa in f.iter_mut() {
+                        let w = mat_vec(r, *fa);
+                        *fa = [-w[0], -w[1], -w[2]];
+                    }
+                });
+            }
+        }
+        most
+    }
+
+    /// Rotation (row-major) of entry `i` of `batch` from the last update.
+    pub fn rotation(&self, batch: usize, i: usize) -> &[f64; 9] {
+        &self.batches[batch].rotation[i]
+    }
+
+    /// Elastic force on local node `a` of entry `i` of batch `batch` (N).
+    #[inline]
+    pub fn force(&self, store: &ElementStore, batch: usize, i: usize, a: usize) -> [f64; 3] {
+        self.batches[batch].force[i * store.batches[batch].k + a]
+    }
+
+    /// The warped block `R K_ab Rᵀ` (N/m, row-major) of entry `i` of `batch`.
+    #[inline]
+    pub fn block(&self, store: &ElementStore, batch: usize, i: usize, a: usize, b: usize) -> [f64; 9] {
+        let bt = &store.batches[batch];
+        let st = &self.batches[batch];
+        if bt.is_tet() {
+            let g = &st.rotated_grads[i * 4..i * 4 + 4];
+            let mut out = [0.0; 9];
+            add_block(&mut out, g[a], g[b], bt.volume[i], bt.lame.0, bt.lame.1);
+            return out;
+        }
+        let r = &st.rotation[i];
+        let k = bt.block(i, a, b);
+        // R K Rᵀ
+        let mut rk = [0.0; 9];
+        for p in 0..3 {
+            for q in 0..3 {
+                rk[3 * p + q] = r[3 * p] * k[q] + r[3 * p + 1] * k[3 + q] + r[3 * p + 2] * k[6 + q];
+            }
+        }
+        std::array::from_fn(|pq| {
+            let (p, q) = (pq / 3, pq % 3);
+            rk[3 * p] * r[3 * q] + rk[3 * p + 1] * r[3 * q + 1] + rk[3 * p + 2] * r[3 * q + 2]
+        })
+    }
+
+    /// Elastic energy `½ Σ_e (Rᵀx - X)ᵀ K_e (Rᵀx - X)` (J) at positions `x`
+    /// with the current rotations.
+    pub fn energy(&self, store: &ElementStore, x: &[[f64; 3]]) -> f64 {
+        store
+            .batches
+            .iter()
+            .zip(&self.batches)
+            .map(|(b, st)| {
+                (0..b.len())
+                    .into_par_iter()
+                    .with_min_len(TASK)
+                    .map(|i| {
+                        let k = b.k;
+                        let u: Vec<[f64; 3]> = (0..k)
+                            .map(|a| {
+                                let l = mat_t_vec(&st.rotation[i], x[b.nodes[i * k + a] as usize]);
+                                let xr = b.rest[i * k + a];
+                                [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
+                            })
+                            .collect();
+                        let mut f = vec![[0.0; 3]; k];
+                        b.apply_stiffness(i, &u, &mut f);
+                        0.5 * u.iter().zip(&f).map(|(u, f)| u[0] * f[0] + u[1] * f[1] + u[2] * f[2]).sum::<f64>()
+                    })
+                    .collect::<Vec<f64>>()
+                    .iter()
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+}
+
+/// Forces `f_a = -V R σ g_a` and rotated gradients `R g_a` of tetrahedron `i`.
+#[inline]
+fn tet_forces(b: &Batch, i: usize, r: &[f64; 9], f: &[f64; 9], out: &mut [[f64; 3]], rg: &mut [[f64; 3]]) {
+    let (lambda, mu) = b.lame;
+    // M = Rᵀ F, ε = sym(M) - I
+    let mut m = [0.0; 9];
+    for p in 0..3 {
+        for q in 0..3 {
+            m[3 * p + q] = r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q];
+        }
+    }
+    let e = [
+        m[0] - 1.0,
+        0.5 * (m[1] + m[3]),
+        0.5 * (m[2] + m[6]),
+        0.5 * (m[1] + m[3]),
+        m[4] - 1.0,
+        0.5 * (m[5] + m[7]),
+        0.5 * (m[2] + m[6]),
+        0.5 * (m[5] + m[7]),
+        m[8] - 1.0,
+    ];
+    let tr = e[0] + e[4] + e[8];
+    let s: [f64; 9] = std::array::from_fn(|pq| 2.0 * mu * e[pq] + if pq % 4 == 0 { lambda * tr } else { 0.0 });
+    let v = b.volume[i];
+    for a in 0..4 {
+        let g = b.stress_grads[i * 4 + a];
+        let sg = mat_vec(&s, g);
+        let w = mat_vec(r, sg);
+        out[a] = [-v * w[0], -v * w[1], -v * w[2]];
+        rg[a] = mat_vec(r, g);
+    }
+}

@@ -1,0 +1,188 @@
+//! Preconditioned conjugate gradients with a 3x3 block-Jacobi
+//! preconditioner, warm-started from the caller's guess.
+//!
+//! The matrix stores both triangles and is symmetric, so `y = A x` is
+//! computed row by row as `y_i = (column i) · x`, in parallel without
+//! write conflicts. Dot products sum fixed-size chunks in parallel and the
+//! chunk sums in order, so the iterates are bitwise independent of the
+//! thread count.
+
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use rayon::prelude::*;
+
+use super::{LinearSolver, SolveError, SolveStats};
+
+/// Chunk length of the deterministic reductions.
+const CHUNK: usize = 4096;
+
+/// PCG solver (see module docs).
+pub struct ConjugateGradient {
+    /// Relative residual `|b - A x| / |b|` to reach.
+    pub tolerance: f64,
+    /// Iteration cap; reaching it is an error.
+    pub max_iterations: usize,
+    /// Value index of entry `(3j + r, 3j + c)` at `[j][3r + c]`.
+    diagonal_blocks: Vec<[usize; 9]>,
+    /// Inverted diagonal blocks of the current matrix.
+    inverse_blocks: Vec<[f64; 9]>,
+    r: Vec<f64>,
+    z: Vec<f64>,
+    p: Vec<f64>,
+    ap: Vec<f64>,
+}
+
+impl ConjugateGradient {
+    /// A solver with the given tolerance and iteration cap.
+    pub fn new(tolerance: f64, max_iterations: usize) -> Self {
+        ConjugateGradient {
+            tolerance,
+            max_iterations,
+            diagonal_blocks: Vec::new(),
+            inverse_blocks: Vec::new(),
+            r: Vec::new(),
+            z: Vec::new(),
+            p: Vec::new(),
+            ap: Vec::new(),
+        }
+    }
+
+    fn precondition(&self, r: &[f64], z: &mut [f64]) {
+        z.par_chunks_mut(3).zip(r.par_chunks(3)).zip(&self.inverse_blocks).for_each(|((z, r), m)| {
+            for i in 0..3 {
+                z[i] = m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2];
+            }
+        });
+    }
+}
+
+/// `y = A x` for symmetric `A` stored in both triangles.
+pub fn symmetric_matvec(a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mut [f64]) {
+    let (sym, val) = a.parts();
+    let (cp, ri) = (sym.col_ptr(), sym.row_idx());
+    y.par_iter_mut().with_min_len(512).enumerate().for_each(|(i, yi)| {
+        let mut s = 0.0;
+        for p in cp[i]..cp[i + 1] {
+            s += val[p] * x[ri[p]];
+        }
+        *yi = s;
+    });
+}
+
+/// `Σ a_i b_i`, summed in fixed chunks (deterministic).
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let partial: Vec<f64> =
+        a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)).map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum()).collect();
+    partial.iter().sum()
+}
+
+/// Inverse of a 3x3 matrix (row-major); the identity where it is singular.
+fn invert3(m: [f64; 9]) -> [f64; 9] {
+    let c = [
+        m[4] * m[8] - m[5] * m[7],
+        m[2] * m[7] - m[1] * m[8],
+        m[1] * m[5] - m[2] * m[4],
+        m[5] * m[6] - m[3] * m[8],
+        m[0] * m[8] - m[2] * m[6],
+        m[2] * m[3] - m[0] * m[5],
+        m[3] * m[7] - m[4] * m[6],
+        m[1] * m[6] - m[0] * m[7],
+        m[0] * m[4] - m[1] * m[3],
+    ];
+    let det = m[0] * c[0] + m[1] * c[3] + m[2] * c[6];
+    if det.abs() > 0.0 && det.is_finite() {
+        c.map(|x| x / det)
+    } else {
+        [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    }
+}
+
+impl LinearSolver for ConjugateGradient {
+    fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError> {
+        let n = pattern.nrows();
+        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+        self.diagonal_blocks = (0..n / 3)
+            .map(|j| {
+                let mut slots = [0usize; 9];
+                for c in 0..3 {
+                    let col = 3 * j + c;
+                    let rows = &ri[cp[col]..cp[col + 1]];
+                    for r in 0..3 {
+                        let p = rows
+                            .binary_search(&(3 * j + r))
+                            .map_err(|_| SolveError::Analysis(format!("block {j} has no diagonal")))?;
+                        slots[3 * r + c] = cp[col] + p;
+                    }
+                }
+                Ok(slots)
+            })
+            .collect::<Result<_, SolveError>>()?;
+        self.inverse_blocks = vec![[0.0; 9]; n / 3];
+        for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
+            *v = vec![0.0; n];
+        }
+        Ok(())
+    }
+
+    fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
+        let val = matrix.parts().1;
+        if val.iter().any(|v| !v.is_finite()) {
+            return Err(SolveError::NonFinite);
+        }
+        self.inverse_blocks.par_iter_mut().zip(&self.diagonal_blocks).for_each(|(inv, slots)| {
+            *inv = invert3(slots.map(|s| val[s]));
+        });
+        Ok(())
+    }
+
+    fn solve(
+        &mut self,
+        matrix: SparseColMatRef<'_, usize, f64>,
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<SolveStats, SolveError> {
+        if b.iter().chain(x.iter()).any(|v| !v.is_finite()) {
+            return Err(SolveError::NonFinite);
+        }
+        let norm_b = dot(b, b).sqrt();
+        if norm_b == 0.0 {
+            x.fill(0.0);
+            return Ok(SolveStats { iterations: 0, residual: 0.0 });
+        }
+        symmetric_matvec(matrix, x, &mut self.ap);
+        self.r.par_iter_mut().zip(b).zip(&self.ap).for_each(|((r, b), ax)| *r = b - ax);
+        let mut z = std::mem::take(&mut self.z);
+        self.precondition(&self.r, &mut z);
+        self.z = z;
+        self.p.copy_from_slice(&self.z);
+        let mut rz = dot(&self.r, &self.z);
+        let mut residual = dot(&self.r, &self.r).sqrt() / norm_b;
+        for it in 0..self.max_iterations {
+            if residual <= self.tolerance {
+                return Ok(SolveStats { iterations: it, residual });
+            }
+            symmetric_matvec(matrix, &self.p, &mut self.ap);
+            let pap = dot(&self.p, &self.ap);
+            if !(pap > 0.0) {
+                return Err(SolveError::NotPositiveDefinite { pivot: it, n: b.len() });
+            }
+            let alpha = rz / pap;
+            x.par_iter_mut().zip(&self.p).for_each(|(x, p)| *x += alpha * p);
+            self.r.par_iter_mut().zip(&self.ap).for_each(|(r, ap)| *r -= alpha * ap);
+            let mut z = std::mem::take(&mut self.z);
+            self.precondition(&self.r, &mut z);
+            self.z = z;
+            let rz_new = dot(&self.r, &self.z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            self.p.par_iter_mut().zip(&self.z).for_each(|(p, z)| *p = z + beta * *p);
+            residual = dot(&self.r, &self.r).sqrt() / norm_b;
+            if !residual.is_finite() {
+                return Err(SolveError::NonFinite);
+            }
+        }
+        if residual <= self.tolerance {
+            return Ok(SolveStats { iterations: self.max_iterations, residual });
+        }
+        Err(SolveError::NotConverged { iterations: self.max_iterations, residual, tolerance: self.tolerance })
+    }
+}
