@@ -198,7 +198,7 @@ fn global_matrix_is_bitwise_independent_of_the_thread_count() {
             let store = ElementStore::build(&mesh, &material(), &BasisOptions::default()).unwrap();
             let pattern = SparsePattern::build(mesh.nodes.len(), &store);
             let mut values = vec![0.0; pattern.nnz()];
-            pattern.assemble(&mut values, |b, i, a, c| store.batches[b].block(i, a, c));
+            pattern.assemble(&mut values, |b, i, c, out| store.batches[b].block_column(i, c, out));
             values.iter().map(|v| v.to_bits()).collect::<Vec<u64>>()
         })
     };

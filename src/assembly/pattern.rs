@@ -168,24 +168,31 @@ impl SparsePattern {
         SparseColMatRef::new(self.symbolic.as_ref(), values)
     }
 
-    /// Adds every element matrix to `values` (which the caller zeroes).
+    /// Writes the global matrix into `values` (every entry is overwritten).
     ///
-    /// `block(batch, element, a, b)` returns the row-major 3x3 block
-    /// `K_ab` of that element (rows: local node `a`, columns: local node
-    /// `b`). Node `j` adds, for every element touching it (as local `b`),
-    /// the blocks `K_ab` of all `a` into its own columns.
-    pub fn assemble<F>(&self, values: &mut [f64], block: F)
+    /// `blocks(batch, element, b, out)` fills `out[a]` with the row-major
+    /// 3x3 block `K_ab` of that element for every local node `a` (rows) and
+    /// the given local node `b` (columns). Node `j` zeroes its own columns,
+    /// then adds, for every element touching it as local `b`, the column of
+    /// blocks `K_·b` into them.
+    pub fn assemble<F>(&self, values: &mut [f64], blocks: F)
     where
-        F: Fn(usize, usize, usize, usize) -> [f64; 9] + Sync,
+        F: Fn(usize, usize, usize, &mut [[f64; 9]]) + Sync,
     {
         assert_eq!(values.len(), self.nnz());
         let shared = SharedValues(values.as_mut_ptr());
-        (0..self.num_blocks).into_par_iter().with_min_len(64).for_each(|j| {
+        let col_ptr = self.symbolic.col_ptr();
+        (0..self.num_blocks).into_par_iter().with_min_len(64).for_each_init(Vec::new, |scratch, j| {
             let stride = self.col_stride[j];
+            for p in col_ptr[3 * j]..col_ptr[3 * j + 3] {
+                // SAFETY: entries of columns 3j..3j+3 belong to this node task only.
+                unsafe { *shared.0.add(p) = 0.0 };
+            }
             for inc in &self.incidences[self.offsets[j] as usize..self.offsets[j + 1] as usize] {
                 let slots = &self.slots[inc.slots as usize..(inc.slots + inc.size) as usize];
-                for (a, &slot) in slots.iter().enumerate() {
-                    let kab = block(inc.batch as usize, inc.element as usize, a, inc.local as usize);
+                scratch.resize(slots.len(), [0.0; 9]);
+                blocks(inc.batch as usize, inc.element as usize, inc.local as usize, scratch);
+                for (kab, &slot) in scratch.iter().zip(slots) {
                     for c in 0..3 {
                         for r in 0..3 {
                             // SAFETY: `slot + c * stride + r` lies in column 3j + c

@@ -15,7 +15,6 @@
 //! `f_a = -V R σ g_a` with `σ = λ tr(ε) I + 2 μ ε`, `ε = sym(Rᵀ F) - I`: no
 //! element matrix is stored or multiplied.
 
-use cleave_kernels::elasticity::add_block;
 use cleave_kernels::rotation::{polar_rotations, rotation_matrix};
 use rayon::prelude::*;
 
@@ -155,30 +154,59 @@ impl Corotation {
         self.batches[batch].force[i * store.batches[batch].k + a]
     }
 
-    /// The warped block `R K_ab Rᵀ` (N/m, row-major) of entry `i` of `batch`.
+    /// The warped blocks `scale R K_ab Rᵀ` (N/m, row-major) of entry `i` of
+    /// `batch` for every local `a` and the given `b`.
     #[inline]
-    pub fn block(&self, store: &ElementStore, batch: usize, i: usize, a: usize, b: usize) -> [f64; 9] {
+    pub fn block_column(
+        &self,
+        store: &ElementStore,
+        batch: usize,
+        i: usize,
+        b: usize,
+        scale: f64,
+        out: &mut [[f64; 9]],
+    ) {
         let bt = &store.batches[batch];
         let st = &self.batches[batch];
         if bt.is_tet() {
+            // K_ab[p][q] = w (λ g_a[p] g_b[q] + μ g_a[q] g_b[p] + μ δ_pq g_a·g_b)
             let g = &st.rotated_grads[i * 4..i * 4 + 4];
-            let mut out = [0.0; 9];
-            add_block(&mut out, g[a], g[b], bt.volume[i], bt.lame.0, bt.lame.1);
-            return out;
+            let w = scale * bt.volume[i];
+            let gb = g[b];
+            let (l, m) = (w * bt.lame.0, w * bt.lame.1);
+            let lgb = [l * gb[0], l * gb[1], l * gb[2]];
+            let mgb = [m * gb[0], m * gb[1], m * gb[2]];
+            for (o, ga) in out.iter_mut().zip(g) {
+                let d = ga[0] * mgb[0] + ga[1] * mgb[1] + ga[2] * mgb[2];
+                *o = [
+                    ga[0] * lgb[0] + ga[0] * mgb[0] + d,
+                    ga[0] * lgb[1] + ga[1] * mgb[0],
+                    ga[0] * lgb[2] + ga[2] * mgb[0],
+                    ga[1] * lgb[0] + ga[0] * mgb[1],
+                    ga[1] * lgb[1] + ga[1] * mgb[1] + d,
+                    ga[1] * lgb[2] + ga[2] * mgb[1],
+                    ga[2] * lgb[0] + ga[0] * mgb[2],
+                    ga[2] * lgb[1] + ga[1] * mgb[2],
+                    ga[2] * lgb[2] + ga[2] * mgb[2] + d,
+                ];
+            }
+            return;
         }
         let r = &st.rotation[i];
-        let k = bt.block(i, a, b);
-        // R K Rᵀ
-        let mut rk = [0.0; 9];
-        for p in 0..3 {
-            for q in 0..3 {
-                rk[3 * p + q] = r[3 * p] * k[q] + r[3 * p + 1] * k[3 + q] + r[3 * p + 2] * k[6 + q];
+        for (a, o) in out.iter_mut().enumerate() {
+            let k = bt.block(i, a, b);
+            // R K Rᵀ
+            let mut rk = [0.0; 9];
+            for p in 0..3 {
+                for q in 0..3 {
+                    rk[3 * p + q] = r[3 * p] * k[q] + r[3 * p + 1] * k[3 + q] + r[3 * p + 2] * k[6 + q];
+                }
             }
+            *o = std::array::from_fn(|pq| {
+                let (p, q) = (pq / 3, pq % 3);
+                scale * (rk[3 * p] * r[3 * q] + rk[3 * p + 1] * r[3 * q + 1] + rk[3 * p + 2] * r[3 * q + 2])
+            });
         }
-        std::array::from_fn(|pq| {
-            let (p, q) = (pq / 3, pq % 3);
-            rk[3 * p] * r[3 * q] + rk[3 * p + 1] * r[3 * q + 1] + rk[3 * p + 2] * r[3 * q + 2]
-        })
     }
 
     /// Elastic energy `½ Σ_e (Rᵀx - X)ᵀ K_e (Rᵀx - X)` (J) at positions `x`

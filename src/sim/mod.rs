@@ -160,6 +160,8 @@ pub struct Simulation {
     colliders: Vec<Collider>,
     displacement: Vec<[f64; 3]>,
     velocity: Vec<[f64; 3]>,
+    /// Velocity of the step before (for the warm start of iterative solves).
+    previous_velocity: Vec<[f64; 3]>,
     corotation: Corotation,
     solver: Box<dyn LinearSolver>,
     analysed: bool,
@@ -206,6 +208,7 @@ impl Simulation {
             colliders: Vec::new(),
             displacement: vec![[0.0; 3]; n],
             velocity: vec![[0.0; 3]; n],
+            previous_velocity: vec![[0.0; 3]; n],
             corotation,
             solver,
             analysed: false,
@@ -258,6 +261,7 @@ impl Simulation {
             return Err(Error::Parameter(format!("need {} finite velocities", self.velocity.len())));
         }
         self.velocity.copy_from_slice(v);
+        self.previous_velocity.copy_from_slice(v);
         Ok(())
     }
 
@@ -458,8 +462,7 @@ impl Simulation {
         let values = &mut self.values;
         let pattern = &self.pattern;
         self.timings.time(Phase::Assembly, || {
-            values.fill(0.0);
-            pattern.assemble(values, |b, i, a, bb| store.batches[b].block(i, a, bb))
+            pattern.assemble(values, |b, i, bb, out| store.batches[b].block_column(i, bb, out))
         });
         let g = self.params.gravity;
         let mut rhs: Vec<f64> = self.masses.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
@@ -508,8 +511,7 @@ impl Simulation {
         {
             let (pattern, values, corotation) = (&self.pattern, &mut self.values, &self.corotation);
             self.timings.time(Phase::Assembly, || {
-                values.fill(0.0);
-                pattern.assemble(values, |b, i, a, bb| corotation.block(store, b, i, a, bb).map(|v| c_k * v));
+                pattern.assemble(values, |b, i, bb, out| corotation.block_column(store, b, i, bb, c_k, out));
                 pattern.gather(&mut force, |b, i, a| corotation.force(store, b, i, a));
             });
         }
@@ -546,8 +548,15 @@ impl Simulation {
             }
         }
         constraints.apply(&self.pattern, &mut self.values, &mut rhs);
-        let mut v: Vec<f64> = self.velocity.iter().flatten().copied().collect();
+        // warm start: the velocity extrapolated linearly from the last two steps
+        let mut v: Vec<f64> = self
+            .velocity
+            .iter()
+            .zip(&self.previous_velocity)
+            .flat_map(|(v, p)| [2.0 * v[0] - p[0], 2.0 * v[1] - p[1], 2.0 * v[2] - p[2]])
+            .collect();
         let solve = self.solve_system(&rhs, &mut v)?;
+        self.previous_velocity.copy_from_slice(&self.velocity);
         for i in 0..n {
             let vi = [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
             self.velocity[i] = vi;

@@ -3,7 +3,9 @@
 //!
 //! The matrix stores both triangles and is symmetric, so `y = A x` is
 //! computed row by row as `y_i = (column i) · x`, in parallel without
-//! write conflicts. Dot products sum fixed-size chunks in parallel and the
+//! write conflicts, reading the pattern's 3x3 block structure (one 32-bit
+//! block row index per 9 values instead of a 64-bit index per value, which
+//! halves the traffic of this memory-bound kernel). Dot products sum fixed-size chunks in parallel and the
 //! chunk sums in order, so the iterates are bitwise independent of the
 //! thread count.
 
@@ -25,6 +27,12 @@ pub struct ConjugateGradient {
     diagonal_blocks: Vec<[usize; 9]>,
     /// Inverted diagonal blocks of the current matrix.
     inverse_blocks: Vec<[f64; 9]>,
+    /// Block structure: block rows of block column `j` at
+    /// `block_rows[block_ptr[j]..block_ptr[j + 1]]`, its first value at
+    /// `value_start[j]`.
+    block_ptr: Vec<u32>,
+    block_rows: Vec<u32>,
+    value_start: Vec<usize>,
     r: Vec<f64>,
     z: Vec<f64>,
     p: Vec<f64>,
@@ -39,11 +47,33 @@ impl ConjugateGradient {
             max_iterations,
             diagonal_blocks: Vec::new(),
             inverse_blocks: Vec::new(),
+            block_ptr: Vec::new(),
+            block_rows: Vec::new(),
+            value_start: Vec::new(),
             r: Vec::new(),
             z: Vec::new(),
             p: Vec::new(),
             ap: Vec::new(),
         }
+    }
+
+    /// `y = A x` through the block structure (see module docs).
+    fn matvec(&self, a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mut [f64]) {
+        let val = a.parts().1;
+        y.par_chunks_mut(3).with_min_len(128).enumerate().for_each(|(j, yj)| {
+            let rows = &self.block_rows[self.block_ptr[j] as usize..self.block_ptr[j + 1] as usize];
+            let stride = 3 * rows.len();
+            let start = self.value_start[j];
+            for (c, out) in yj.iter_mut().enumerate() {
+                let col = &val[start + c * stride..start + (c + 1) * stride];
+                let mut s = 0.0;
+                for (blk, &i) in col.chunks_exact(3).zip(rows) {
+                    let xi = &x[3 * i as usize..3 * i as usize + 3];
+                    s += blk[0] * xi[0] + blk[1] * xi[1] + blk[2] * xi[2];
+                }
+                *out = s;
+            }
+        });
     }
 
     fn precondition(&self, r: &[f64], z: &mut [f64]) {
@@ -117,6 +147,23 @@ impl LinearSolver for ConjugateGradient {
             })
             .collect::<Result<_, SolveError>>()?;
         self.inverse_blocks = vec![[0.0; 9]; n / 3];
+        // block structure: every block column repeats its block rows in its
+        // three scalar columns (the layout of `assembly::SparsePattern`)
+        self.block_ptr = vec![0];
+        self.block_rows.clear();
+        self.value_start.clear();
+        for j in 0..n / 3 {
+            let rows = &ri[cp[3 * j]..cp[3 * j + 1]];
+            let regular = rows.len() % 3 == 0
+                && rows.chunks(3).all(|r| r[0] % 3 == 0 && r[1] == r[0] + 1 && r[2] == r[0] + 2)
+                && (1..3).all(|c| ri[cp[3 * j + c]..cp[3 * j + c + 1]] == *rows);
+            if !regular {
+                return Err(SolveError::Analysis(format!("block column {j} is not a repeated 3x3 block column")));
+            }
+            self.value_start.push(cp[3 * j]);
+            self.block_rows.extend(rows.chunks(3).map(|r| (r[0] / 3) as u32));
+            self.block_ptr.push(self.block_rows.len() as u32);
+        }
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
             *v = vec![0.0; n];
         }
@@ -148,7 +195,9 @@ impl LinearSolver for ConjugateGradient {
             x.fill(0.0);
             return Ok(SolveStats { iterations: 0, residual: 0.0 });
         }
-        symmetric_matvec(matrix, x, &mut self.ap);
+        let mut ap = std::mem::take(&mut self.ap);
+        self.matvec(matrix, x, &mut ap);
+        self.ap = ap;
         self.r.par_iter_mut().zip(b).zip(&self.ap).for_each(|((r, b), ax)| *r = b - ax);
         let mut z = std::mem::take(&mut self.z);
         self.precondition(&self.r, &mut z);
@@ -160,7 +209,9 @@ impl LinearSolver for ConjugateGradient {
             if residual <= self.tolerance {
                 return Ok(SolveStats { iterations: it, residual });
             }
-            symmetric_matvec(matrix, &self.p, &mut self.ap);
+            let mut ap = std::mem::take(&mut self.ap);
+            self.matvec(matrix, &self.p, &mut ap);
+            self.ap = ap;
             let pap = dot(&self.p, &self.ap);
             if !(pap > 0.0) {
                 return Err(SolveError::NotPositiveDefinite { pivot: it, n: b.len() });

@@ -1,9 +1,15 @@
 //! Sparse Cholesky `A = L L^T` through faer's low-level API: the symbolic
 //! factorisation (ordering, elimination tree, supernodes) once per pattern,
 //! the numeric one into kept buffers whenever values change.
+//!
+//! The fill-reducing ordering is METIS nested dissection on the graph of
+//! 3x3 blocks (nodes), expanded to the scalar unknowns; on 3-D meshes it
+//! gives markedly less fill than faer's built-in AMD (measured by
+//! `cleave bench`). AMD remains the fallback if METIS fails.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
 };
@@ -40,13 +46,13 @@ impl Cholesky {
 
 impl LinearSolver for Cholesky {
     fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError> {
-        let sym = factorize_symbolic_cholesky(
-            pattern,
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| SolveError::Analysis(format!("{e:?}")))?;
+        let nd = nested_dissection(pattern);
+        let ordering = match &nd {
+            Some((fwd, inv)) => SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, pattern.nrows())),
+            None => SymmetricOrdering::Amd,
+        };
+        let sym = factorize_symbolic_cholesky(pattern, Side::Lower, ordering, CholeskySymbolicParams::default())
+            .map_err(|e| SolveError::Analysis(format!("{e:?}")))?;
         let par = self.par();
         let req = sym
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
@@ -119,4 +125,56 @@ pub fn solve_checked(
     let mut stats = solver.solve(a, b, x)?;
     stats.residual = relative_residual(a, b, x);
     Ok(stats)
+}
+
+/// METIS nested dissection of the block graph of `pattern` (a repeated
+/// 3x3 block structure), as scalar `(forward, inverse)` permutations, or
+/// `None` when the pattern is not blocked or METIS fails.
+fn nested_dissection(pattern: SymbolicSparseColMatRef<'_, usize>) -> Option<(Vec<usize>, Vec<usize>)> {
+    let n = pattern.nrows();
+    if n % 3 != 0 || n == 0 {
+        return None;
+    }
+    let nb = n / 3;
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    let mut xadj: Vec<metis_sys::idx_t> = Vec::with_capacity(nb + 1);
+    let mut adjncy: Vec<metis_sys::idx_t> = Vec::new();
+    xadj.push(0);
+    for j in 0..nb {
+        for &r in ri[cp[3 * j]..cp[3 * j + 1]].iter().step_by(3) {
+            if r / 3 != j {
+                adjncy.push(metis_sys::idx_t::try_from(r / 3).ok()?);
+            }
+        }
+        xadj.push(metis_sys::idx_t::try_from(adjncy.len()).ok()?);
+    }
+    let mut nvtxs = metis_sys::idx_t::try_from(nb).ok()?;
+    let mut perm = vec![0 as metis_sys::idx_t; nb];
+    let mut iperm = vec![0 as metis_sys::idx_t; nb];
+    let mut options = [0 as metis_sys::idx_t; metis_sys::METIS_NOPTIONS as usize];
+    // SAFETY: the arrays have the lengths METIS_NodeND documents (nvtxs + 1,
+    // xadj[nvtxs], nvtxs, nvtxs, METIS_NOPTIONS) and live across the calls;
+    // a null vwgt means unit weights.
+    let status = unsafe {
+        metis_sys::METIS_SetDefaultOptions(options.as_mut_ptr());
+        metis_sys::METIS_NodeND(
+            &mut nvtxs,
+            xadj.as_mut_ptr(),
+            adjncy.as_mut_ptr(),
+            std::ptr::null_mut(),
+            options.as_mut_ptr(),
+            perm.as_mut_ptr(),
+            iperm.as_mut_ptr(),
+        )
+    };
+    if status != metis_sys::rstatus_et_METIS_OK {
+        return None;
+    }
+    // METIS: row i of the reordered matrix is row perm[i] of the original
+    let fwd: Vec<usize> = perm.iter().flat_map(|&p| (0..3).map(move |c| 3 * p as usize + c)).collect();
+    let mut inv = vec![0usize; n];
+    for (i, &f) in fwd.iter().enumerate() {
+        inv[f] = i;
+    }
+    Some((fwd, inv))
 }

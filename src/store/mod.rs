@@ -103,6 +103,13 @@ impl Batch {
         std::array::from_fn(|rc| ke[(3 * a + rc / 3) * n + 3 * b + rc % 3])
     }
 
+    /// The blocks `K_ab` of entry `i` for all `a` and the given `b`.
+    pub fn block_column(&self, i: usize, b: usize, out: &mut [[f64; 9]]) {
+        for (a, o) in out.iter_mut().enumerate() {
+            *o = self.block(i, a, b);
+        }
+    }
+
     /// The dense row-major `3k x 3k` element stiffness `K_e` of entry `i`.
     pub fn element_matrix(&self, i: usize) -> Vec<f64> {
         let (k, n) = (self.k, 3 * self.k);
