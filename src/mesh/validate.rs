@@ -70,7 +70,8 @@ pub struct ValidationOptions {
     /// stay well inside this bound.
     pub planarity: f64,
     /// Two nodes closer than `duplicate` times the bounding box diagonal are
-    /// duplicates. Default `1e-9`.
+    /// duplicates. Default `1e-9`; `0` skips the check (cut meshes carry
+    /// coincident nodes on the two sides of every cut).
     pub duplicate: f64,
 }
 

@@ -11,6 +11,7 @@ use crate::meshing::{box_hex, box_tet, clipped_box, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{Collider, FixedRegion, Simulation, SimulationParams};
 use crate::store::{BasisOptions, QuadratureRule};
+use crate::topology::Plane;
 use crate::Error;
 
 /// Command-line overrides of a scene.
@@ -138,6 +139,11 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
             write(&mut sim, 0)?;
             let bar = progress(steps);
             for step in 1..=steps {
+                for cut in s.cut.iter().filter(|c| c.step == step) {
+                    if let Some(p) = &cut.plane {
+                        sim.cut_plane(&Plane { point: p.point, normal: p.normal })?;
+                    }
+                }
                 stats.push(sim.step()?.solve);
                 if step % s.output.every == 0 {
                     write(&mut sim, step / s.output.every)?;

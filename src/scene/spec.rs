@@ -520,8 +520,30 @@ impl Scene {
                 ));
             }
         }
-        if !self.cut.is_empty() {
-            return Err(s.unsupported("cut", "cutting is not implemented yet"));
+        for (i, c) in self.cut.iter().enumerate() {
+            match (&c.plane, &c.polygon) {
+                (Some(p), None) => {
+                    let n = p.normal;
+                    if !finite3(&p.point) || !finite3(&n) || n.iter().all(|&x| x == 0.0) {
+                        let plane = format!("{p:?}");
+                        return Err(s.invalid(
+                            &format!("cut.{i}.plane"),
+                            plane,
+                            "needs a finite point and a non-zero normal",
+                        ));
+                    }
+                }
+                (None, Some(_)) => {
+                    return Err(s.unsupported(
+                        &format!("cut.{i}.polygon"),
+                        "polygon (partial) cuts are not implemented yet; use plane",
+                    ))
+                }
+                _ => return Err(s.invalid(&format!("cut.{i}"), "…", "give exactly one of plane or polygon")),
+            }
+            if self.simulation.mode == Mode::Static {
+                return Err(s.invalid(&format!("cut.{i}.step"), c.step, "cuts need mode = \"dynamic\""));
+            }
         }
         if !self.refine.is_empty() {
             return Err(s.unsupported("refine", "refinement is not implemented yet"));

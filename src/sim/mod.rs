@@ -28,9 +28,10 @@ use cleave_kernels::elasticity::{stress, von_mises};
 
 use crate::assembly::{Constraints, SparsePattern};
 use crate::material::Material;
-use crate::mesh::PolyMesh;
+use crate::mesh::{PolyMesh, ValidationOptions};
 use crate::solve::{make_solver, solve_checked, LinearSolver, SolveStats, SolverKind};
 use crate::store::{BasisOptions, ElementStore};
+use crate::topology::{cut_by_plane, CutReport, Plane, SplitOptions};
 use crate::Error;
 
 /// Physical and numerical parameters of a simulation.
@@ -70,7 +71,7 @@ impl Default for SimulationParams {
             mass_damping: 0.0,
             stiffness_damping: 0.0,
             corotated: true,
-            solver: SolverKind::Cholesky,
+            solver: SolverKind::Auto,
             tolerance: 1e-8,
             max_iterations: 2000,
         }
@@ -195,7 +196,7 @@ impl Simulation {
         let masses = store.lumped_masses(mesh.nodes.len(), params.material.density);
         let n = mesh.nodes.len();
         let corotation = Corotation::new(&store);
-        let solver = make_solver(params.solver, params.tolerance, params.max_iterations);
+        let solver = make_solver(params.solver, 3 * n, params.tolerance, params.max_iterations);
         let values = vec![0.0; pattern.nnz()];
         Ok(Simulation {
             mesh,
@@ -402,6 +403,59 @@ impl Simulation {
         let (store, corotation) = (&self.store, &self.corotation);
         self.pattern.gather(&mut f, |b, i, a| corotation.force(store, b, i, a));
         f
+    }
+
+    /// Cuts the body along a whole plane given in the rest (material)
+    /// frame: elements the plane crosses are split into convex parts, and
+    /// the two sides separate (wicke2007 §5). New nodes on edges take the
+    /// state interpolated along their edge, duplicated nodes the state of
+    /// their original; element data, pattern and solver analysis are
+    /// rebuilt. On error the simulation is left unchanged.
+    pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
+        let t = std::time::Instant::now();
+        let mut mesh = self.mesh.clone();
+        let report = cut_by_plane(&mut mesh, plane, &SplitOptions::default())?;
+        // the two sides of a cut carry coincident nodes by design
+        let opts = ValidationOptions { duplicate: 0.0, ..Default::default() };
+        if let Some(problem) = mesh.check(&opts, 1).into_iter().next() {
+            return Err(problem.into());
+        }
+        let store = ElementStore::build(&mesh, &self.params.material, &self.params.basis)?;
+        let mut state = [
+            std::mem::take(&mut self.displacement),
+            std::mem::take(&mut self.velocity),
+            std::mem::take(&mut self.previous_velocity),
+        ];
+        for s in &mut state {
+            for nn in &report.split.new_nodes {
+                let (a, b) = (s[nn.a as usize], s[nn.b as usize]);
+                s.push(cleave_kernels::vec3::lerp(a, b, nn.t));
+            }
+            for &(original, _) in &report.duplicated {
+                s.push(s[original as usize]);
+            }
+        }
+        let [displacement, velocity, previous_velocity] = state;
+        self.displacement = displacement;
+        self.velocity = velocity;
+        self.previous_velocity = previous_velocity;
+        self.install(mesh, store);
+        self.timings.add(Phase::Topology, t.elapsed().as_secs_f64());
+        Ok(report)
+    }
+
+    /// Takes a new mesh and its element store: pattern, masses, rotations,
+    /// solver and scratch follow (the state vectors must already match).
+    fn install(&mut self, mesh: PolyMesh, store: ElementStore) {
+        let n = mesh.nodes.len();
+        self.pattern = SparsePattern::build(n, &store);
+        self.masses = store.lumped_masses(n, self.params.material.density);
+        self.corotation = Corotation::new(&store);
+        self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
+        self.analysed = false;
+        self.values = vec![0.0; self.pattern.nnz()];
+        self.mesh = mesh;
+        self.store = store;
     }
 
     /// Prescribed displacements: fixed regions, then pins; nodes of no

@@ -1,6 +1,8 @@
 //! Topology changes of a [`crate::mesh::PolyMesh`]: plane splits (and, built
 //! on them, cuts, sliver merges and refinement).
 
+mod cut;
 mod split;
 
+pub use cut::{cut_by_plane, CutReport};
 pub use split::{split_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};

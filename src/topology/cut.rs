@@ -1,0 +1,104 @@
+//! Cutting along a whole plane: split every element the plane crosses,
+//! then separate the material on the plane by duplicating the nodes that
+//! lie on it (wicke2007 §5.1 with §5.2's node duplication over the whole
+//! plane).
+//!
+//! After the split every element lies on one side of the plane. A node
+//! used by elements on both sides is duplicated: the elements on the
+//! negative side take the copy, so the faces on the plane that the two
+//! sides shared become two boundary faces and the body opens there.
+//! Positions are in the mesh's rest (material) frame.
+
+use super::split::{split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
+use crate::mesh::{Face, PolyMesh};
+
+/// What a plane cut changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CutReport {
+    /// The split (new nodes on edges, split elements).
+    pub split: SplitReport,
+    /// `(original, copy)` for every duplicated node; the copy starts with
+    /// the original's state.
+    pub duplicated: Vec<(u32, u32)>,
+}
+
+/// Side of every element with respect to `plane` (+1 or -1, by its
+/// centroid; after a split no element straddles the plane).
+fn element_sides(mesh: &PolyMesh, plane: &Plane) -> Vec<i8> {
+    (0..mesh.elements.len())
+        .map(|e| {
+            let c = mesh.element_centroid(e);
+            let d: f64 = (0..3).map(|i| (c[i] - plane.point[i]) * plane.normal[i]).sum();
+            if d >= 0.0 {
+                1
+            } else {
+                -1
+            }
+        })
+        .collect()
+}
+
+/// Splits along `plane` and separates the two sides (see module docs).
+pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<CutReport, SplitError> {
+    let split = split_by_plane(mesh, plane, opts)?;
+    let side = element_sides(mesh, plane);
+    // nodes used on both sides
+    let mut used = vec![0u8; mesh.nodes.len()];
+    for (e, el) in mesh.elements.iter().enumerate() {
+        let bit = if side[e] > 0 { 1 } else { 2 };
+        for &v in &el.nodes {
+            used[v as usize] |= bit;
+        }
+    }
+    let mut copy = vec![u32::MAX; mesh.nodes.len()];
+    let mut duplicated = Vec::new();
+    for v in 0..used.len() {
+        if used[v] == 3 {
+            copy[v] = mesh.nodes.len() as u32;
+            mesh.nodes.push(mesh.nodes[v]);
+            duplicated.push((v as u32, copy[v]));
+        }
+    }
+    if duplicated.is_empty() {
+        return Ok(CutReport { split, duplicated });
+    }
+    // faces: which sides use each one
+    let mut face_sides = vec![0u8; mesh.faces.len()];
+    for (e, el) in mesh.elements.iter().enumerate() {
+        for r in &el.faces {
+            face_sides[r.face as usize] |= if side[e] > 0 { 1 } else { 2 };
+        }
+    }
+    let remap = |v: &u32| if copy[*v as usize] != u32::MAX { copy[*v as usize] } else { *v };
+    let mut separated = vec![u32::MAX; mesh.faces.len()];
+    for e in 0..mesh.elements.len() {
+        if side[e] > 0 {
+            continue;
+        }
+        for k in 0..mesh.elements[e].faces.len() {
+            let f = mesh.elements[e].faces[k].face as usize;
+            if face_sides[f] == 3 {
+                // a face on the plane shared with the positive side: the
+                // negative element gets its own copy on the duplicated nodes
+                if separated[f] == u32::MAX {
+                    let face = &mesh.faces[f];
+                    separated[f] = mesh.faces.len() as u32;
+                    let moved = Face {
+                        vertices: face.vertices.iter().map(remap).collect(),
+                        triangles: face.triangles.iter().map(|t| t.map(|v| remap(&v))).collect(),
+                    };
+                    mesh.faces.push(moved);
+                }
+                mesh.elements[e].faces[k].face = separated[f];
+            } else if face_sides[f] == 2 && separated[f] == u32::MAX {
+                // used by negative elements only: rename its nodes in place
+                separated[f] = f as u32;
+                let face = &mut mesh.faces[f];
+                face.vertices.iter_mut().for_each(|v| *v = remap(v));
+                face.triangles.iter_mut().for_each(|t| *t = t.map(|v| remap(&v)));
+            }
+        }
+        mesh.refresh_element_nodes(e);
+    }
+    Ok(CutReport { split, duplicated })
+}
