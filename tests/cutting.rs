@@ -7,6 +7,8 @@ use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::topology::{cut_by_plane, Plane, SplitOptions};
 use proptest::prelude::*;
 
+mod common;
+
 /// Signed distance of `x` from `plane` (normal not normalised).
 fn distance(plane: &Plane, x: [f64; 3]) -> f64 {
     let n = plane.normal;
@@ -59,17 +61,11 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     mesh
 }
 
-fn plane_strategy() -> impl Strategy<Value = Plane> {
-    (0.1f64..0.9, 0.1f64..0.9, 0.1f64..0.9, -1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0)
-        .prop_filter("non-zero normal", |p| p.3.abs() + p.4.abs() + p.5.abs() > 1e-2)
-        .prop_map(|(x, y, z, a, b, c)| Plane { point: [x, y, z], normal: [a, b, c] })
-}
-
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(150))]
 
     #[test]
-    fn random_cut_sequences_keep_the_mesh_valid(seed in 0u64..10_000, planes in prop::collection::vec(plane_strategy(), 1..4)) {
+    fn random_cut_sequences_keep_the_mesh_valid(seed in 0u64..10_000, planes in prop::collection::vec(common::plane_strategy(0.1, 0.9), 1..4)) {
         let mut mesh = if seed % 2 == 0 {
             random_convex([0.0; 3], [1.0; 3], 5, seed).unwrap()
         } else {

@@ -6,7 +6,6 @@ use cleave::assembly::SparsePattern;
 use cleave::material::Material;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_hex, box_tet, random_convex};
-use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementStore, QuadratureRule};
 use cleave::topology::{split_by_plane, Plane, SplitOptions};
 use cleave_kernels::{elasticity, mean_value, quadrature};
@@ -93,38 +92,6 @@ fn element_matrices_are_symmetric_with_rigid_null_space() {
     check_element_matrices(&random_convex([0.0; 3], [1.0; 3], 6, 7).unwrap(), QuadratureRule::Reference(3));
 }
 
-/// A linear field on the boundary; the largest nodal error relative to the
-/// field's size.
-fn patch_error(mesh: PolyMesh, rule: QuadratureRule) -> (f64, usize) {
-    let grad = [[1e-3, 2e-3, -1e-3], [-2e-3, 5e-4, 3e-3], [1e-3, -1e-3, 2e-3]];
-    let field =
-        |x: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| 0.01 + (0..3).map(|j| grad[i][j] * x[j]).sum::<f64>()) };
-    let adj = mesh.adjacency();
-    let mut boundary = vec![false; mesh.nodes.len()];
-    for (f, face) in mesh.faces.iter().enumerate() {
-        if adj.is_boundary_face(f) {
-            face.vertices.iter().for_each(|&v| boundary[v as usize] = true);
-        }
-    }
-    let interior = boundary.iter().filter(|&&b| !b).count();
-    let params = SimulationParams { gravity: [0.0; 3], basis: BasisOptions { quadrature: rule }, ..Default::default() };
-    let mut sim = Simulation::new(mesh, params).unwrap();
-    for (i, &b) in boundary.iter().enumerate() {
-        if b {
-            sim.pin(i, field(sim.mesh().nodes[i])).unwrap();
-        }
-    }
-    sim.solve_static().unwrap();
-    let err = sim
-        .mesh()
-        .nodes
-        .iter()
-        .zip(sim.displacements())
-        .map(|(&x, u)| (0..3).map(|i| (u[i] - field(x)[i]).abs()).fold(0.0, f64::max))
-        .fold(0.0, f64::max);
-    (err / 0.02, interior)
-}
-
 /// A box of tetrahedra cut by random planes: tetrahedra and polyhedra mixed.
 fn mixed_mesh(seed: u64) -> PolyMesh {
     let mut mesh = box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap();
@@ -145,10 +112,10 @@ fn consistent_rule_passes_the_patch_test() {
     for seed in 0..6 {
         for mesh in [random_convex([0.0; 3], [1.0; 3], 14, seed).unwrap(), mixed_mesh(seed)] {
             let kinds = mesh.count_by_vertex_count().len();
-            let (err, interior) = patch_error(mesh.clone(), QuadratureRule::Consistent);
+            let (err, interior) = common::patch_error(mesh.clone(), QuadratureRule::Consistent);
             assert!(interior > 0, "the mesh has interior nodes");
             assert!(err < 1e-9, "seed {seed}: consistent rule patch error {err:e} ({kinds} vertex counts)");
-            let (paper, _) = patch_error(mesh, QuadratureRule::Paper);
+            let (paper, _) = common::patch_error(mesh, QuadratureRule::Paper);
             worst_paper = worst_paper.max(paper);
         }
     }

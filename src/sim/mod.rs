@@ -528,7 +528,18 @@ impl Simulation {
         }
         constraints.apply(&self.pattern, &mut self.values, &mut rhs);
         let mut x = vec![0.0; rhs.len()];
-        let stats = self.solve_system(&rhs, &mut x)?;
+        // a static system has no mass term and no warm start: `auto` takes
+        // the direct solver whatever the size
+        let stats = if self.params.solver == SolverKind::Auto {
+            let dynamic = std::mem::replace(&mut self.solver, make_solver(SolverKind::Cholesky, 0, 1.0, 1));
+            let analysed = std::mem::replace(&mut self.analysed, false);
+            let stats = self.solve_system(&rhs, &mut x);
+            self.solver = dynamic;
+            self.analysed = analysed;
+            stats?
+        } else {
+            self.solve_system(&rhs, &mut x)?
+        };
         self.displacement = x.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         Ok(stats)
     }

@@ -1,15 +1,73 @@
-//! Helpers shared by the cantilever tests.
+//! Helpers shared by the integration tests (each test binary uses a part).
+#![allow(dead_code)]
 
 use cleave::material::Material;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_tet;
 use cleave::sim::{FixedRegion, Simulation, SimulationParams};
+use cleave::solve::SolverKind;
+use cleave::store::{BasisOptions, QuadratureRule};
+use cleave::topology::Plane;
+use proptest::prelude::*;
+
+/// The linear field of the patch tests, `u(x) = d + G x` (m).
+pub fn linear_field(x: [f64; 3]) -> [f64; 3] {
+    const G: [[f64; 3]; 3] = [[1e-3, 2e-3, -1e-3], [-2e-3, 5e-4, 3e-3], [1e-3, -1e-3, 2e-3]];
+    const D: [f64; 3] = [0.01, -0.02, 0.005];
+    std::array::from_fn(|i| D[i] + (0..3).map(|j| G[i][j] * x[j]).sum::<f64>())
+}
+
+/// The patch test: boundary nodes pinned to [`linear_field`], no body
+/// force, static solve with `rule`. Returns the largest nodal error
+/// relative to the field's size, and the number of interior nodes.
+pub fn patch_error(mesh: PolyMesh, rule: QuadratureRule) -> (f64, usize) {
+    let adj = mesh.adjacency();
+    let mut boundary = vec![false; mesh.nodes.len()];
+    for (f, face) in mesh.faces.iter().enumerate() {
+        if adj.is_boundary_face(f) {
+            face.vertices.iter().for_each(|&v| boundary[v as usize] = true);
+        }
+    }
+    let interior = boundary.iter().filter(|&&b| !b).count();
+    let params = SimulationParams { gravity: [0.0; 3], basis: BasisOptions { quadrature: rule }, ..Default::default() };
+    let mut sim = Simulation::new(mesh, params).unwrap();
+    for (i, &b) in boundary.iter().enumerate() {
+        if b {
+            sim.pin(i, linear_field(sim.mesh().nodes[i])).unwrap();
+        }
+    }
+    sim.solve_static().unwrap();
+    let size = |v: [f64; 3]| v.iter().map(|x| x.abs()).fold(0.0, f64::max);
+    let scale = sim.mesh().nodes.iter().map(|&x| size(linear_field(x))).fold(0.0, f64::max);
+    let err = sim
+        .mesh()
+        .nodes
+        .iter()
+        .zip(sim.displacements())
+        .map(|(&x, u)| {
+            let want = linear_field(x);
+            size([u[0] - want[0], u[1] - want[1], u[2] - want[2]])
+        })
+        .fold(0.0, f64::max);
+    (err / scale, interior)
+}
+
+/// Planes through points of `[lo, hi]^3` with any non-degenerate normal.
+pub fn plane_strategy(lo: f64, hi: f64) -> impl Strategy<Value = Plane> {
+    (lo..hi, lo..hi, lo..hi, -1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0)
+        .prop_filter("non-zero normal", |p| p.3.abs() + p.4.abs() + p.5.abs() > 1e-2)
+        .prop_map(|(x, y, z, a, b, c)| Plane { point: [x, y, z], normal: [a, b, c] })
+}
 
 /// Mean vertical deflection (m, positive down) of the tip face x = 4 of the
 /// 4 x 1 x 1 m beam `mesh` clamped at x = 0 under self-weight
 /// (E = 1e5 Pa, nu = 0.3, rho = 1000 kg/m^3).
 pub fn tip_deflection(mesh: PolyMesh) -> f64 {
-    let params = SimulationParams { material: Material::new(1e5, 0.3, 1000.0).unwrap(), ..Default::default() };
+    let params = SimulationParams {
+        material: Material::new(1e5, 0.3, 1000.0).unwrap(),
+        solver: SolverKind::Cholesky,
+        ..Default::default()
+    };
     let mut sim = Simulation::new(mesh, params).unwrap();
     sim.fix(FixedRegion::clamp([-1.0; 3], [1e-3, 2.0, 2.0])).unwrap();
     let stats = sim.solve_static().unwrap();
