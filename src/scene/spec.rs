@@ -269,11 +269,7 @@ fn default_tolerance() -> f64 {
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec {
-            kind: SolverKind::Auto,
-            tolerance: default_tolerance(),
-            max_iterations: default_max_iterations(),
-        }
+        SolverSpec { kind: SolverKind::Auto, tolerance: default_tolerance(), max_iterations: default_max_iterations() }
     }
 }
 

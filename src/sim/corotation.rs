@@ -143,6 +143,29 @@ impl Corotation {
         most
     }
 
+    /// A rotation per node (row-major): the normalised sum of the
+    /// quaternions of the elements around it, each sign-aligned with the
+    /// first (identity for nodes of no element).
+    pub fn node_frames(&self, store: &ElementStore, num_nodes: usize) -> Vec<[f64; 9]> {
+        let mut sum = vec![[0.0f64; 4]; num_nodes];
+        for (b, st) in store.batches.iter().zip(&self.batches) {
+            for (i, q) in st.quaternion.iter().enumerate() {
+                for &v in &b.nodes[i * b.k..(i + 1) * b.k] {
+                    let s = &mut sum[v as usize];
+                    let sign = if s[0] * q[0] + s[1] * q[1] + s[2] * q[2] + s[3] * q[3] < 0.0 { -1.0 } else { 1.0 };
+                    (0..4).for_each(|c| s[c] += sign * q[c]);
+                }
+            }
+        }
+        sum.iter()
+            .map(|s| {
+                let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
+                let q = if len > 0.0 { s.map(|c| c / len) } else { [1.0, 0.0, 0.0, 0.0] };
+                rotation_matrix(q)
+            })
+            .collect()
+    }
+
     /// Rotation (row-major) of entry `i` of `batch` from the last update.
     pub fn rotation(&self, batch: usize, i: usize) -> &[f64; 9] {
         &self.batches[batch].rotation[i]

@@ -166,6 +166,8 @@ pub struct Simulation {
     corotation: Corotation,
     solver: Box<dyn LinearSolver>,
     analysed: bool,
+    /// Whether the solver holds the rest-state reference of this topology.
+    referenced: bool,
     values: Vec<f64>,
     steps: usize,
     timings: PhaseTimings,
@@ -213,6 +215,7 @@ impl Simulation {
             corotation,
             solver,
             analysed: false,
+            referenced: false,
             values,
             steps: 0,
             timings,
@@ -453,6 +456,7 @@ impl Simulation {
         self.corotation = Corotation::new(&store);
         self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
         self.analysed = false;
+        self.referenced = false;
         self.values = vec![0.0; self.pattern.nnz()];
         self.mesh = mesh;
         self.store = store;
@@ -507,6 +511,31 @@ impl Simulation {
             return Err(crate::solve::SolveError::NonFinite.into());
         }
         Ok(stats)
+    }
+
+    /// For preconditioners in rotated frames: the rest-state matrix
+    /// `c_m M + c_k K` with the same constraints, once per topology, and the
+    /// node frames of this step.
+    fn prepare_rotated_reference(&mut self, c_m: f64, c_k: f64, constraints: &Constraints) -> Result<(), Error> {
+        let t = std::time::Instant::now();
+        if !self.referenced {
+            let mut rest = vec![0.0; self.pattern.nnz()];
+            let store = &self.store;
+            self.pattern.assemble(&mut rest, |b, i, bb, out| {
+                store.batches[b].block_column(i, bb, out);
+                out.iter_mut().for_each(|blk| blk.iter_mut().for_each(|v| *v *= c_k));
+            });
+            for (i, m) in self.masses.iter().enumerate() {
+                (0..3).for_each(|d| rest[self.pattern.diagonal_slot(3 * i + d)] += c_m * m);
+            }
+            let mut unused = vec![0.0; 3 * self.masses.len()];
+            constraints.apply(&self.pattern, &mut rest, &mut unused);
+            self.solver.set_reference(self.pattern.matrix(&rest))?;
+            self.referenced = true;
+        }
+        self.solver.set_frames(&self.corotation.node_frames(&self.store, self.mesh.nodes.len()));
+        self.timings.add(Phase::Solve, t.elapsed().as_secs_f64());
+        Ok(())
     }
 
     /// Solves the linear static problem `K u = f_gravity` with the fixed
@@ -614,6 +643,9 @@ impl Simulation {
         }
         constraints.apply(&self.pattern, &mut self.values, &mut rhs);
         // warm start: the velocity extrapolated linearly from the last two steps
+        if self.solver.wants_frames() {
+            self.prepare_rotated_reference(c_m, c_k, &constraints)?;
+        }
         let mut v: Vec<f64> = self
             .velocity
             .iter()

@@ -12,7 +12,7 @@
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
-use super::{LinearSolver, SolveError, SolveStats};
+use super::{Cholesky, LinearSolver, SolveError, SolveStats};
 
 /// Chunk length of the deterministic reductions.
 const CHUNK: usize = 4096;
@@ -37,6 +37,16 @@ pub struct ConjugateGradient {
     z: Vec<f64>,
     p: Vec<f64>,
     ap: Vec<f64>,
+    /// The rotated rest-state preconditioner, when chosen.
+    rest: Option<RestPreconditioner>,
+}
+
+/// `z = R A₀⁻¹ Rᵀ r`: the Cholesky factor of the rest-state matrix `A₀`
+/// applied in per-block rotated frames `R`.
+struct RestPreconditioner {
+    cholesky: Cholesky,
+    frames: Vec<[f64; 9]>,
+    ready: bool,
 }
 
 impl ConjugateGradient {
@@ -54,7 +64,15 @@ impl ConjugateGradient {
             z: Vec::new(),
             p: Vec::new(),
             ap: Vec::new(),
+            rest: None,
         }
+    }
+
+    /// Preconditions with the rotated rest-state Cholesky factor (see
+    /// [`super::SolverKind::CgRest`]) once a reference matrix is given.
+    pub fn with_rest_preconditioner(mut self) -> Self {
+        self.rest = Some(RestPreconditioner { cholesky: Cholesky::default(), frames: Vec::new(), ready: false });
+        self
     }
 
     /// `y = A x` through the block structure (see module docs).
@@ -76,12 +94,31 @@ impl ConjugateGradient {
         });
     }
 
-    fn precondition(&self, r: &[f64], z: &mut [f64]) {
+    fn precondition(&mut self, r: &[f64], z: &mut [f64]) -> Result<(), SolveError> {
+        if let Some(rest) = self.rest.as_mut().filter(|p| p.ready) {
+            let rotate = |frames: &[[f64; 9]], v: &[f64], out: &mut [f64], transpose: bool| {
+                out.par_chunks_mut(3).zip(v.par_chunks(3)).zip(frames).for_each(|((o, v), m)| {
+                    for i in 0..3 {
+                        o[i] = if transpose {
+                            m[i] * v[0] + m[3 + i] * v[1] + m[6 + i] * v[2]
+                        } else {
+                            m[3 * i] * v[0] + m[3 * i + 1] * v[1] + m[3 * i + 2] * v[2]
+                        };
+                    }
+                });
+            };
+            let mut t = vec![0.0; r.len()];
+            rotate(&rest.frames, r, &mut t, true);
+            rest.cholesky.solve_in_place(&mut t)?;
+            rotate(&rest.frames, &t, z, false);
+            return Ok(());
+        }
         z.par_chunks_mut(3).zip(r.par_chunks(3)).zip(&self.inverse_blocks).for_each(|((z, r), m)| {
             for i in 0..3 {
                 z[i] = m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2];
             }
         });
+        Ok(())
     }
 }
 
@@ -199,9 +236,9 @@ impl LinearSolver for ConjugateGradient {
         self.matvec(matrix, x, &mut ap);
         self.ap = ap;
         self.r.par_iter_mut().zip(b).zip(&self.ap).for_each(|((r, b), ax)| *r = b - ax);
-        let mut z = std::mem::take(&mut self.z);
-        self.precondition(&self.r, &mut z);
-        self.z = z;
+        let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
+        self.precondition(&r, &mut z)?;
+        (self.r, self.z) = (r, z);
         self.p.copy_from_slice(&self.z);
         let mut rz = dot(&self.r, &self.z);
         let mut residual = dot(&self.r, &self.r).sqrt() / norm_b;
@@ -219,9 +256,9 @@ impl LinearSolver for ConjugateGradient {
             let alpha = rz / pap;
             x.par_iter_mut().zip(&self.p).for_each(|(x, p)| *x += alpha * p);
             self.r.par_iter_mut().zip(&self.ap).for_each(|(r, ap)| *r -= alpha * ap);
-            let mut z = std::mem::take(&mut self.z);
-            self.precondition(&self.r, &mut z);
-            self.z = z;
+            let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
+            self.precondition(&r, &mut z)?;
+            (self.r, self.z) = (r, z);
             let rz_new = dot(&self.r, &self.z);
             let beta = rz_new / rz;
             rz = rz_new;
@@ -235,5 +272,25 @@ impl LinearSolver for ConjugateGradient {
             return Ok(SolveStats { iterations: self.max_iterations, residual });
         }
         Err(SolveError::NotConverged { iterations: self.max_iterations, residual, tolerance: self.tolerance })
+    }
+
+    fn set_reference(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
+        if let Some(rest) = self.rest.as_mut() {
+            rest.cholesky.analyze(matrix.symbolic())?;
+            rest.cholesky.factor(matrix)?;
+            rest.ready = true;
+        }
+        Ok(())
+    }
+
+    fn wants_frames(&self) -> bool {
+        self.rest.is_some()
+    }
+
+    fn set_frames(&mut self, frames: &[[f64; 9]]) {
+        if let Some(rest) = self.rest.as_mut() {
+            rest.frames.clear();
+            rest.frames.extend_from_slice(frames);
+        }
     }
 }

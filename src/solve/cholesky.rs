@@ -38,6 +38,18 @@ impl Cholesky {
         self.par.unwrap_or(Par::rayon(0))
     }
 
+    /// Overwrites `x` with `A⁻¹ x` for the last factored `A`.
+    pub fn solve_in_place(&mut self, x: &mut [f64]) -> Result<(), SolveError> {
+        let par = self.par();
+        let (Some(sym), Some(buf), true) = (self.symbolic.as_ref(), self.scratch.as_mut(), self.factored) else {
+            return Err(SolveError::NotReady);
+        };
+        let llt = LltRef::<'_, usize, f64>::new(sym, &self.l_values);
+        let n = x.len();
+        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(x, n, 1), par, MemStack::new(buf));
+        Ok(())
+    }
+
     /// Number of stored entries of `L` (fill), once analysed.
     pub fn factor_nnz(&self) -> usize {
         self.symbolic.as_ref().map_or(0, |s| s.len_val())
@@ -97,17 +109,11 @@ impl LinearSolver for Cholesky {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
-        let par = self.par();
-        let (Some(sym), Some(buf), true) = (self.symbolic.as_ref(), self.scratch.as_mut(), self.factored) else {
-            return Err(SolveError::NotReady);
-        };
         if b.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
         x.copy_from_slice(b);
-        let llt = LltRef::<'_, usize, f64>::new(sym, &self.l_values);
-        let n = x.len();
-        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(x, n, 1), par, MemStack::new(buf));
+        self.solve_in_place(x)?;
         if x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite);
         }

@@ -57,6 +57,20 @@ pub trait LinearSolver: Send {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError>;
+    /// Takes a reference matrix on the same pattern that a preconditioner
+    /// may factor once per topology (the rest-state system); ignored by
+    /// default.
+    fn set_reference(&mut self, _matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
+        Ok(())
+    }
+    /// Whether this solver wants [`LinearSolver::set_reference`] and
+    /// [`LinearSolver::set_frames`].
+    fn wants_frames(&self) -> bool {
+        false
+    }
+    /// Takes the rotation (row-major) of every 3x3 block for the coming
+    /// solves; ignored by default.
+    fn set_frames(&mut self, _frames: &[[f64; 9]]) {}
 }
 
 /// The solvers a simulation can use.
@@ -72,6 +86,10 @@ pub enum SolverKind {
     Cholesky,
     /// Block-Jacobi preconditioned conjugate gradients, warm-started.
     Cg,
+    /// Conjugate gradients preconditioned by the Cholesky factor of the
+    /// rest-state system, applied in per-node rotated frames
+    /// (`z = R A₀⁻¹ Rᵀ r`); factored once per topology.
+    CgRest,
 }
 
 /// Largest system that [`SolverKind::Auto`] solves by Cholesky.
@@ -84,6 +102,7 @@ pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterat
         SolverKind::Auto if unknowns <= AUTO_CHOLESKY_MAX_UNKNOWNS => Box::new(Cholesky::default()),
         SolverKind::Cholesky => Box::new(Cholesky::default()),
         SolverKind::Auto | SolverKind::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
+        SolverKind::CgRest => Box::new(ConjugateGradient::new(tolerance, max_iterations).with_rest_preconditioner()),
     }
 }
 
