@@ -89,6 +89,12 @@ fn bad_input_ends_in_one_clear_error() {
     // a Poisson ratio of 0.5
     let err = run_fails(d, &scene_with_mesh("good.mesh").replace("poisson = 0.3", "poisson = 0.5"));
     assert!(err.contains("(-1, 0.5)"), "{err}");
+    // a massless body: zero density is refused before anything runs
+    let err = run_fails(d, &scene_with_mesh("good.mesh").replace("density = 1000", "density = 0"));
+    assert!(err.contains("material.density") && err.contains("> 0"), "{err}");
+    // NaN parameters are refused with their key
+    let err = run_fails(d, &format!("{}[simulation]\nmode = \"dynamic\"\ndt = nan\n", scene_with_mesh("good.mesh")));
+    assert!(err.contains("simulation.dt"), "{err}");
     // an unconstrained body is singular
     let err = run_fails(
         d,
