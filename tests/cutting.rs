@@ -19,7 +19,19 @@ fn distance(plane: &Plane, x: [f64; 3]) -> f64 {
 /// Cuts and checks every invariant of a plane cut.
 fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     let (v0, a0) = (mesh.total_volume(), mesh.boundary_area());
+    let before = mesh.clone();
     let report = cut_by_plane(&mut mesh, &plane, &SplitOptions::default()).unwrap();
+    // elements the report does not list as touched are exactly as they were
+    for e in 0..before.elements.len() {
+        if report.touched.binary_search(&(e as u32)).is_err() {
+            let loops = |m: &PolyMesh| -> Vec<Vec<u32>> {
+                m.elements[e].faces.iter().map(|r| m.faces[r.face as usize].vertices.clone()).collect()
+            };
+            assert_eq!(loops(&before), loops(&mesh), "untouched element {e} changed");
+        }
+    }
+    let touched: Vec<usize> = report.touched.iter().map(|&e| e as usize).collect();
+    mesh.check_elements(&touched, &ValidationOptions::default()).unwrap();
     let v1 = mesh.total_volume();
     assert!((v1 - v0).abs() <= 1e-12 * v0, "volume {v0} -> {v1}");
     let opts = ValidationOptions { duplicate: 0.0, ..Default::default() };

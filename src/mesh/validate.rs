@@ -136,23 +136,13 @@ impl PolyMesh {
                 push!(MeshError::NodeIndexOutOfRange { element, index: bad as usize, nodes: self.nodes.len() });
                 continue;
             }
-            let g = face_geometry(&self.nodes, &face.vertices);
-            if g.area <= 1e-14 * g.diameter * g.diameter || g.area == 0.0 {
-                push!(MeshError::ZeroAreaFace { face: f });
-            } else if g.max_deviation > opts.planarity * g.diameter {
-                push!(MeshError::NonPlanarFace { face: f, deviation: g.max_deviation, tolerance: opts.planarity });
+            if let Some(problem) = self.face_shape_problem(f, opts) {
+                push!(problem);
             }
         }
         for e in 0..self.elements.len() {
-            if let Err(err) = self.check_element_closed(e) {
-                push!(err);
-                continue;
-            }
-            let v = self.element_volume(e);
-            if v < 0.0 && v.abs() > 0.0 {
-                push!(MeshError::InwardElement { element: e });
-            } else if v.is_nan() || v <= 0.0 {
-                push!(MeshError::NonPositiveVolume { element: e, volume: v });
+            if let Some(problem) = self.element_shape_problem(e) {
+                push!(problem);
             }
         }
         let mut owner: Vec<Option<(usize, bool)>> = vec![None; self.faces.len()];
@@ -174,6 +164,61 @@ impl PolyMesh {
             push!(MeshError::DuplicateNodes { a, b, distance });
         }
         out
+    }
+
+    /// Checks only `elements` (after a local topology change): their faces'
+    /// indices, areas and planarity, closedness, orientation and volume.
+    pub fn check_elements(&self, elements: &[usize], opts: &ValidationOptions) -> Result<(), MeshError> {
+        for &e in elements {
+            let el = &self.elements[e];
+            for r in &el.faces {
+                let f = r.face as usize;
+                if f >= self.faces.len() {
+                    return Err(MeshError::FaceIndexOutOfRange { element: e, index: f, faces: self.faces.len() });
+                }
+                if let Some(&bad) = self.faces[f].vertices.iter().find(|&&v| v as usize >= self.nodes.len()) {
+                    return Err(MeshError::NodeIndexOutOfRange {
+                        element: e,
+                        index: bad as usize,
+                        nodes: self.nodes.len(),
+                    });
+                }
+                if let Some(problem) = self.face_shape_problem(f, opts) {
+                    return Err(problem);
+                }
+            }
+            if let Some(problem) = self.element_shape_problem(e) {
+                return Err(problem);
+            }
+        }
+        Ok(())
+    }
+
+    /// A face with (almost) no area or off its plane.
+    fn face_shape_problem(&self, f: usize, opts: &ValidationOptions) -> Option<MeshError> {
+        let g = face_geometry(&self.nodes, &self.faces[f].vertices);
+        if g.area <= 1e-14 * g.diameter * g.diameter || g.area == 0.0 {
+            Some(MeshError::ZeroAreaFace { face: f })
+        } else if g.max_deviation > opts.planarity * g.diameter {
+            Some(MeshError::NonPlanarFace { face: f, deviation: g.max_deviation, tolerance: opts.planarity })
+        } else {
+            None
+        }
+    }
+
+    /// An element that is open, inconsistently oriented, inward or flat.
+    fn element_shape_problem(&self, e: usize) -> Option<MeshError> {
+        if let Err(err) = self.check_element_closed(e) {
+            return Some(err);
+        }
+        let v = self.element_volume(e);
+        if v < 0.0 {
+            Some(MeshError::InwardElement { element: e })
+        } else if !(v > 0.0) {
+            Some(MeshError::NonPositiveVolume { element: e, volume: v })
+        } else {
+            None
+        }
     }
 
     /// Checks that every edge of element `e` is used by exactly two of its

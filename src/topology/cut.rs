@@ -20,19 +20,25 @@ pub struct CutReport {
     /// `(original, copy)` for every duplicated node; the copy starts with
     /// the original's state.
     pub duplicated: Vec<(u32, u32)>,
+    /// Every element whose faces or nodes changed, in increasing order.
+    pub touched: Vec<u32>,
 }
 
-/// Side of every element with respect to `plane` (+1 or -1, by its
-/// centroid; after a split no element straddles the plane).
+/// Side of every element with respect to `plane` (+1 or -1): the side of
+/// its first vertex off the plane (after a split no element straddles it;
+/// an element lying within the snapping distance counts as positive).
 fn element_sides(mesh: &PolyMesh, plane: &Plane) -> Vec<i8> {
-    (0..mesh.elements.len())
-        .map(|e| {
-            let c = mesh.element_centroid(e);
-            let d: f64 = (0..3).map(|i| (c[i] - plane.point[i]) * plane.normal[i]).sum();
-            if d >= 0.0 {
-                1
-            } else {
+    let n = plane.normal;
+    let dist = |v: u32| (0..3).map(|i| (mesh.nodes[v as usize][i] - plane.point[i]) * n[i]).sum::<f64>();
+    mesh.elements
+        .iter()
+        .map(|el| {
+            // the vertex farthest from the plane decides
+            let d = el.nodes.iter().map(|&v| dist(v)).fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m });
+            if d < 0.0 {
                 -1
+            } else {
+                1
             }
         })
         .collect()
@@ -59,8 +65,10 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
             duplicated.push((v as u32, copy[v]));
         }
     }
+    let mut touched: Vec<u32> = split.split_elements.iter().flat_map(|&(a, b)| [a, b]).collect();
     if duplicated.is_empty() {
-        return Ok(CutReport { split, duplicated });
+        touched.sort_unstable();
+        return Ok(CutReport { split, duplicated, touched });
     }
     // faces: which sides use each one
     let mut face_sides = vec![0u8; mesh.faces.len()];
@@ -75,8 +83,11 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
         if side[e] > 0 {
             continue;
         }
+        let mut changed = false;
         for k in 0..mesh.elements[e].faces.len() {
             let f = mesh.elements[e].faces[k].face as usize;
+            // a duplicated node, or a copy (ids past `copy`) of an earlier rename
+            changed |= mesh.faces[f].vertices.iter().any(|&v| copy.get(v as usize).is_none_or(|&c| c != u32::MAX));
             if face_sides[f] == 3 {
                 // a face on the plane shared with the positive side: the
                 // negative element gets its own copy on the duplicated nodes
@@ -98,7 +109,12 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
                 face.triangles.iter_mut().for_each(|t| *t = t.map(|v| remap(&v)));
             }
         }
-        mesh.refresh_element_nodes(e);
+        if changed {
+            mesh.refresh_element_nodes(e);
+            touched.push(e as u32);
+        }
     }
-    Ok(CutReport { split, duplicated })
+    touched.sort_unstable();
+    touched.dedup();
+    Ok(CutReport { split, duplicated, touched })
 }
