@@ -4,7 +4,7 @@
 
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_hex, box_tet, random_convex};
-use cleave::topology::{split_by_plane, Plane, SplitOptions};
+use cleave::topology::{split_by_plane, split_elements_by_plane, Plane, SplitOptions};
 use proptest::prelude::*;
 
 mod common;
@@ -67,6 +67,46 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// A local split of the elements near a random point: only those split,
+    /// their neighbours repaired (no T-junctions), the mesh valid.
+    #[test]
+    fn local_split_keeps_neighbours_conforming(
+        seed in 0u64..10_000,
+        plane in common::plane_strategy(0.05, 0.95),
+        centre in (0.2f64..0.8, 0.2f64..0.8, 0.2f64..0.8),
+        radius in 0.1f64..0.5,
+    ) {
+        let mut mesh = if seed % 2 == 0 {
+            random_convex([0.0; 3], [1.0; 3], 7, seed).unwrap()
+        } else {
+            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
+        };
+        let chosen: Vec<u32> = (0..mesh.elements.len() as u32)
+            .filter(|&e| {
+                let c = mesh.element_centroid(e as usize);
+                (c[0] - centre.0).powi(2) + (c[1] - centre.1).powi(2) + (c[2] - centre.2).powi(2) < radius * radius
+            })
+            .collect();
+        let (v0, a0, e0) = (mesh.total_volume(), mesh.boundary_area(), mesh.elements.len());
+        let report = split_elements_by_plane(&mut mesh, &plane, &chosen, &SplitOptions::default()).unwrap();
+        for &(kept, _) in &report.split_elements {
+            prop_assert!(chosen.contains(&kept), "element {} was not chosen", kept);
+        }
+        prop_assert_eq!(mesh.elements.len(), e0 + report.split_elements.len());
+        prop_assert!((mesh.total_volume() - v0).abs() <= 1e-12 * v0);
+        prop_assert!((mesh.boundary_area() - a0).abs() <= 1e-11 * a0);
+        if let Err(e) = mesh.validate() {
+            return Err(TestCaseError::fail(format!("invalid after a local split: {e}")));
+        }
+        for e in 0..mesh.elements.len() {
+            prop_assert!(mesh.is_convex(e, SplitOptions::default().snap), "element {} is not convex", e);
+        }
+    }
+}
+
 #[test]
 fn plane_through_grid_nodes_snaps_instead_of_making_needles() {
     // x = 0.5 passes exactly through a layer of nodes of a 2-cell box
@@ -105,4 +145,26 @@ fn invalid_plane_is_an_error() {
     assert!(split_by_plane(&mut m, &Plane { point: [0.5; 3], normal: [0.0; 3] }, &SplitOptions::default()).is_err());
     assert!(split_by_plane(&mut m, &Plane { point: [f64::NAN; 3], normal: [1.0, 0.0, 0.0] }, &SplitOptions::default())
         .is_err());
+}
+
+/// Repaired neighbours (coplanar face halves, nodes on their edges) are
+/// valid mean value elements: the patch test passes on a locally split mesh.
+#[test]
+fn patch_test_passes_after_local_splits() {
+    let mut mesh = box_tet([0.0; 3], [1.0; 3], [4, 4, 4]).unwrap();
+    for (i, normal) in [[1.0, 0.3, 0.2], [0.1, 1.0, -0.4], [0.5, -0.2, 1.0]].iter().enumerate() {
+        let chosen: Vec<u32> = (0..mesh.elements.len() as u32)
+            .filter(|&e| {
+                let c = mesh.element_centroid(e as usize);
+                (c[0] - 0.5).powi(2) + (c[1] - 0.5).powi(2) + (c[2] - 0.5).powi(2) < 0.09
+            })
+            .collect();
+        let plane = Plane { point: [0.45 + 0.05 * i as f64, 0.5, 0.52], normal: *normal };
+        let report = split_elements_by_plane(&mut mesh, &plane, &chosen, &SplitOptions::default()).unwrap();
+        assert!(!report.split_elements.is_empty() && !report.repaired_elements.is_empty());
+    }
+    mesh.validate().unwrap();
+    let (err, interior) = common::patch_error(mesh, cleave::store::QuadratureRule::Consistent);
+    assert!(interior > 0);
+    assert!(err < 1e-9, "patch test error {err:e} after local splits");
 }

@@ -76,8 +76,14 @@ fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
 }
 
+/// Whether `p` lies inside triangle `(a, b, c)` or on its boundary, up to a
+/// relative tolerance: a node inserted on an edge (a T-junction repair) is
+/// computed by interpolation and may sit a rounding error off the line.
 fn inside_or_on(p: [f64; 2], a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> bool {
-    let s = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]);
+    let s = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| {
+        let v = (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]);
+        v + 1e-10 * dist2(p, q)
+    };
     s(a, b, p) >= 0.0 && s(b, c, p) >= 0.0 && s(c, a, p) >= 0.0
 }
 
@@ -113,6 +119,25 @@ mod tests {
         for tri in &t {
             let (a, b, c) = (nodes[tri[0] as usize], nodes[tri[1] as usize], nodes[tri[2] as usize]);
             assert!(cross(sub(b, a), sub(c, a))[2] > 1e-12, "no flat triangle: {tri:?}");
+        }
+    }
+
+    #[test]
+    fn vertex_a_rounding_error_off_an_edge_is_not_cut_off() {
+        // node 4 sits on edge 3-0 up to rounding (a T-junction repair)
+        let t = 0.37;
+        let nodes = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.2, 0.8, 0.0],
+            [0.3, 1.0, 0.0],
+            [0.3 * (1.0 - t) - 1e-15, 1.0 * (1.0 - t), 0.0],
+        ];
+        let tris = triangulate_loop(&nodes, &[0, 1, 2, 3, 4]);
+        assert_eq!(tris.len(), 3);
+        for tri in &tris {
+            let (a, b, c) = (nodes[tri[0] as usize], nodes[tri[1] as usize], nodes[tri[2] as usize]);
+            assert!(cross(sub(b, a), sub(c, a))[2] > 1e-3, "degenerate triangle {tri:?}");
         }
     }
 

@@ -65,7 +65,8 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
             duplicated.push((v as u32, copy[v]));
         }
     }
-    let mut touched: Vec<u32> = split.split_elements.iter().flat_map(|&(a, b)| [a, b]).collect();
+    let mut touched: Vec<u32> =
+        split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.repaired_elements.iter().copied()).collect();
     if duplicated.is_empty() {
         touched.sort_unstable();
         return Ok(CutReport { split, duplicated, touched });

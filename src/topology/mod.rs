@@ -5,4 +5,4 @@ mod cut;
 mod split;
 
 pub use cut::{cut_by_plane, CutReport};
-pub use split::{split_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};
+pub use split::{split_by_plane, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};

@@ -1,7 +1,7 @@
 //! Splitting convex elements by a plane.
 //!
-//! Every element that has nodes strictly on both sides of the plane is
-//! replaced by its two convex parts. One new node is made per crossed global
+//! Every element that has nodes strictly on both sides of the plane (among
+//! the chosen ones, for a local split) is replaced by its two convex parts. One new node is made per crossed global
 //! edge and shared by every element on that edge; every crossed face is split
 //! into two faces shared like the original; both parts get a common cap face.
 //! A node closer to the plane than `snap` times its shortest incident edge is
@@ -61,6 +61,9 @@ pub struct SplitReport {
     /// For each split element: `(kept id, new id)`; the kept id holds the
     /// positive part, the new id (appended) the negative part.
     pub split_elements: Vec<(u32, u32)>,
+    /// Elements that were not split but gained nodes or face halves (local
+    /// splits only), in increasing order.
+    pub repaired_elements: Vec<u32>,
 }
 
 /// A split that cannot be carried out.
@@ -79,6 +82,26 @@ pub enum SplitError {
 
 /// Splits every element that `plane` crosses (see the module docs).
 pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<SplitReport, SplitError> {
+    split(mesh, plane, None, opts)
+}
+
+/// Splits those of `elements` that `plane` crosses, and repairs the
+/// neighbours so the mesh stays conforming (see the module docs).
+pub fn split_elements_by_plane(
+    mesh: &mut PolyMesh,
+    plane: &Plane,
+    elements: &[u32],
+    opts: &SplitOptions,
+) -> Result<SplitReport, SplitError> {
+    split(mesh, plane, Some(elements), opts)
+}
+
+fn split(
+    mesh: &mut PolyMesh,
+    plane: &Plane,
+    only: Option<&[u32]>,
+    opts: &SplitOptions,
+) -> Result<SplitReport, SplitError> {
     let len = norm(plane.normal);
     if !(len > 0.0) || !len.is_finite() || !plane.point.iter().all(|x| x.is_finite()) {
         return Err(SplitError::InvalidPlane(plane.normal));
@@ -109,7 +132,14 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
             }
         })
         .collect();
+    let mut chosen = vec![only.is_none(); mesh.elements.len()];
+    for &e in only.unwrap_or(&[]) {
+        if let Some(c) = chosen.get_mut(e as usize) {
+            *c = true;
+        }
+    }
     let crossed: Vec<usize> = (0..mesh.elements.len())
+        .filter(|&e| chosen[e])
         .filter(|&e| {
             let nodes = &mesh.elements[e].nodes;
             nodes.iter().any(|&v| side[v as usize] > 0) && nodes.iter().any(|&v| side[v as usize] < 0)
@@ -169,6 +199,56 @@ pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -
             mesh.triangulate_face(f_neg as usize);
             face_parts.insert(r.face, (f_pos, f_neg));
         }
+    }
+    // 2b. neighbours that are not split: both halves of a split face they
+    // share, and the new nodes on their edges in their other faces' loops
+    let is_crossed = {
+        let mut m = vec![false; mesh.elements.len()];
+        crossed.iter().for_each(|&e| m[e] = true);
+        m
+    };
+    let mut repaired: Vec<bool> = vec![false; mesh.faces.len()];
+    for f in 0..mesh.faces.len() {
+        if face_parts.contains_key(&(f as u32)) {
+            continue;
+        }
+        let v = &mesh.faces[f].vertices;
+        let mut lp = Vec::with_capacity(v.len() + 2);
+        for i in 0..v.len() {
+            let (a, b) = (v[i], v[(i + 1) % v.len()]);
+            lp.push(a);
+            if let Some(&c) = edge_node.get(&(a.min(b), a.max(b))) {
+                lp.push(c);
+            }
+        }
+        if lp.len() != v.len() {
+            mesh.faces[f].vertices = lp;
+            mesh.triangulate_face(f);
+            repaired[f] = true;
+        }
+    }
+    for e in 0..mesh.elements.len() {
+        if is_crossed[e] {
+            continue;
+        }
+        let refs = &mesh.elements[e].faces;
+        let touches = refs.iter().any(|r| face_parts.contains_key(&r.face) || repaired[r.face as usize]);
+        if !touches {
+            continue;
+        }
+        let mut new_refs = Vec::with_capacity(refs.len() + 2);
+        for r in refs {
+            match face_parts.get(&r.face) {
+                Some(&(fp, fneg)) => {
+                    new_refs.push(FaceRef { face: fp, outward: r.outward });
+                    new_refs.push(FaceRef { face: fneg, outward: r.outward });
+                }
+                None => new_refs.push(*r),
+            }
+        }
+        mesh.elements[e].faces = new_refs;
+        mesh.refresh_element_nodes(e);
+        report.repaired_elements.push(e as u32);
     }
     // 3. split the elements
     let (u, w) = plane_basis(n);
