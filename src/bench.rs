@@ -233,10 +233,58 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
         out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cg, 20)?);
         out.extend(step_measurements("bunny_100k", mesh, SolverKind::Cholesky, 3)?);
     }
+    let bunny = std::path::Path::new("assets/bunny_5k.mesh");
+    if bunny.exists() {
+        out.extend(cut_measurements(crate::io::read_mesh(bunny)?)?);
+    }
     let cells = if quick { [16, 4, 4] } else { [100, 50, 34] };
     let mesh = box_tet([0.0; 3], [2.0, 1.0, 0.68], cells)?;
     out.extend(step_measurements(&format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]), mesh, SolverKind::Cg, 3)?);
     Ok(Report { threads: rayon::current_num_threads(), measurements: out })
+}
+
+/// Wall time per step of the bunny before and after two plane cuts (the
+/// cuts of `scenes/bunny_cut.toml`), and per cut from cut to ready system.
+fn cut_measurements(mesh: PolyMesh) -> Result<Vec<Measurement>, Error> {
+    let label = "bunny_5k";
+    let params = SimulationParams {
+        material: Material::new(5e6, 0.35, 1000.0)?,
+        gravity: [0.0, -9.81, 0.0],
+        dt: 0.01,
+        mass_damping: 0.3,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(mesh, params)?;
+    sim.add_collider(Collider::new([0.0, -0.05, 0.0], [0.0, 1.0, 0.0], 1e9)?);
+    let per_step = |sim: &mut Simulation| -> Result<f64, Error> {
+        let t = Instant::now();
+        for _ in 0..10 {
+            sim.step()?;
+        }
+        Ok(t.elapsed().as_secs_f64() * 1e3 / 10.0)
+    };
+    let before = per_step(&mut sim)?;
+    let (ne0, nn0) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
+    let t = Instant::now();
+    sim.cut_plane(&crate::topology::Plane { point: [0.0, 6.5, 0.0], normal: [0.2, 1.0, 0.3] })?;
+    sim.cut_plane(&crate::topology::Plane { point: [2.0, 0.0, 0.0], normal: [1.0, 0.1, 0.0] })?;
+    let cut = t.elapsed().as_secs_f64() * 1e3 / 2.0;
+    let after = per_step(&mut sim)?;
+    let (ne1, nn1) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
+    let m = |name: &str, ms: f64, elements: usize, nodes: usize| Measurement {
+        name: name.into(),
+        mesh: label.into(),
+        elements,
+        nodes,
+        ms,
+        elements_per_s: elements as f64 / (ms * 1e-3),
+        extra: Some(("steps/s".into(), 1e3 / ms)),
+    };
+    Ok(vec![
+        m("step before cuts", before, ne0, nn0),
+        Measurement { extra: None, ..m("plane cut (to ready)", cut, ne1, nn1) },
+        m("step after cuts", after, ne1, nn1),
+    ])
 }
 
 /// Per-phase wall time per step of `steps` corotated implicit Euler steps
