@@ -4,7 +4,7 @@ use std::fmt::Write;
 use std::path::Path;
 
 use super::{write_text, IoError};
-use crate::mesh::{Adjacency, PolyMesh};
+use crate::mesh::PolyMesh;
 
 /// A triangle surface (m), counter-clockwise seen from outside.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -47,24 +47,15 @@ pub fn read_obj_surface(path: &Path) -> Result<Surface, IoError> {
     Ok(s)
 }
 
-/// Writes the boundary faces of `mesh` (triangulated, outward) at the node
+/// Writes the boundary surface of `mesh` (triangulated, outward) at the node
 /// positions `positions` (rest positions plus displacement, m).
 pub fn write_boundary_obj(path: &Path, mesh: &PolyMesh, positions: &[[f64; 3]]) -> Result<(), IoError> {
-    let adj = Adjacency::new(mesh);
     let mut s = String::new();
     for p in positions {
         let _ = writeln!(s, "v {} {} {}", p[0], p[1], p[2]);
     }
-    for (f, face) in mesh.faces.iter().enumerate() {
-        if !adj.is_boundary_face(f) {
-            continue;
-        }
-        let e = adj.face_elements[f][0] as usize;
-        let outward = mesh.elements[e].faces.iter().find(|r| r.face as usize == f).is_some_and(|r| r.outward);
-        for t in &face.triangles {
-            let t = if outward { *t } else { [t[0], t[2], t[1]] };
-            let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
-        }
+    for t in mesh.boundary_triangles() {
+        let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
     }
     write_text(path, &s)
 }

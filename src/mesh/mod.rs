@@ -305,6 +305,24 @@ impl PolyMesh {
         Ok((PolyMesh::from_cells(nodes, &cells)?, new_id))
     }
 
+    /// Outward triangles (node ids) of the faces that bound exactly one
+    /// element: the boundary surface.
+    pub fn boundary_triangles(&self) -> Vec<[u32; 3]> {
+        let mut users = vec![(0u8, true); self.faces.len()];
+        for el in &self.elements {
+            for r in &el.faces {
+                let u = &mut users[r.face as usize];
+                *u = (u.0.saturating_add(1), r.outward);
+            }
+        }
+        self.faces
+            .iter()
+            .zip(&users)
+            .filter(|(_, u)| u.0 == 1)
+            .flat_map(|(f, u)| f.triangles.iter().map(move |t| if u.1 { *t } else { [t[0], t[2], t[1]] }))
+            .collect()
+    }
+
     /// Total area of the faces that bound exactly one element (m^2).
     pub fn boundary_area(&self) -> f64 {
         let mut users = vec![0u8; self.faces.len()];

@@ -26,9 +26,9 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                     cell_scalars: vec![("von_mises", &vm)],
                     cell_ints: vec![("element_id", &ids), ("vertex_count", &counts)],
                 };
-                write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, &positions, &fields)?;
+                write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, positions, &fields)?;
             }
-            Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), &positions)?,
+            Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), positions)?,
             Format::Png => {
                 return Err(IoError::Unsupported {
                     path: dir.to_path_buf(),

@@ -160,6 +160,10 @@ pub struct Simulation {
     pinned: std::collections::BTreeMap<u32, [f64; 3]>,
     colliders: Vec<Collider>,
     displacement: Vec<[f64; 3]>,
+    /// Current positions `x0 + u` (m), kept in step with `displacement`.
+    position: Vec<[f64; 3]>,
+    /// Outward triangles of the boundary surface (node ids), per topology.
+    boundary: Vec<[u32; 3]>,
     velocity: Vec<[f64; 3]>,
     /// Velocity of the step before (for the warm start of iterative solves).
     previous_velocity: Vec<[f64; 3]>,
@@ -200,6 +204,7 @@ impl Simulation {
         let corotation = Corotation::new(&store);
         let solver = make_solver(params.solver, 3 * n, params.tolerance, params.max_iterations);
         let values = vec![0.0; pattern.nnz()];
+        let (position, boundary) = (mesh.nodes.clone(), mesh.boundary_triangles());
         Ok(Simulation {
             mesh,
             params,
@@ -210,6 +215,8 @@ impl Simulation {
             pinned: Default::default(),
             colliders: Vec::new(),
             displacement: vec![[0.0; 3]; n],
+            position,
+            boundary,
             velocity: vec![[0.0; 3]; n],
             previous_velocity: vec![[0.0; 3]; n],
             corotation,
@@ -275,6 +282,7 @@ impl Simulation {
             return Err(Error::Parameter(format!("need {} finite displacements", self.displacement.len())));
         }
         self.displacement.copy_from_slice(u);
+        self.refresh_positions();
         Ok(())
     }
 
@@ -309,8 +317,28 @@ impl Simulation {
     }
 
     /// Current node positions `x0 + u` (m).
-    pub fn positions(&self) -> Vec<[f64; 3]> {
-        self.mesh.nodes.iter().zip(&self.displacement).map(|(x, u)| [x[0] + u[0], x[1] + u[1], x[2] + u[2]]).collect()
+    pub fn positions(&self) -> &[[f64; 3]] {
+        &self.position
+    }
+
+    /// Current node positions as a flat slice `[x0, y0, z0, x1, ...]` (m),
+    /// ready for a renderer's vertex buffer.
+    pub fn positions_flat(&self) -> &[f64] {
+        bytemuck::cast_slice(&self.position)
+    }
+
+    /// The boundary surface: outward triangles over node ids (index into
+    /// [`Simulation::positions`]), rebuilt when the topology changes.
+    pub fn boundary_triangles(&self) -> &[[u32; 3]] {
+        &self.boundary
+    }
+
+    /// Recomputes the positions from the rest positions and displacements.
+    fn refresh_positions(&mut self) {
+        self.position.clear();
+        self.position.extend(
+            self.mesh.nodes.iter().zip(&self.displacement).map(|(x, u)| [x[0] + u[0], x[1] + u[1], x[2] + u[2]]),
+        );
     }
 
     /// Lumped nodal masses (kg).
@@ -343,7 +371,7 @@ impl Simulation {
     /// the first step and in static solves).
     pub fn von_mises(&self) -> Vec<f64> {
         let (l, m) = self.params.material.lame();
-        let x = self.positions();
+        let x = &self.position;
         let mut out = vec![0.0; self.mesh.elements.len()];
         for (bi, b) in self.store.batches.iter().enumerate() {
             for i in 0..b.len() {
@@ -370,7 +398,7 @@ impl Simulation {
 
     /// Elastic energy (J) with the rotations of the last step.
     pub fn elastic_energy(&self) -> f64 {
-        self.corotation.energy(&self.store, &self.positions())
+        self.corotation.energy(&self.store, &self.position)
     }
 
     /// Kinetic energy `½ Σ m_i |v_i|²` (J).
@@ -390,8 +418,8 @@ impl Simulation {
     /// Angular momentum `Σ m_i x_i × v_i` about the origin (kg m²/s).
     pub fn angular_momentum(&self) -> [f64; 3] {
         let mut l = [0.0; 3];
-        for ((m, x), v) in self.masses.iter().zip(self.positions()).zip(&self.velocity) {
-            let c = cleave_kernels::vec3::cross(x, *v);
+        for ((m, x), v) in self.masses.iter().zip(&self.position).zip(&self.velocity) {
+            let c = cleave_kernels::vec3::cross(*x, *v);
             (0..3).for_each(|i| l[i] += m * c[i]);
         }
         l
@@ -400,7 +428,7 @@ impl Simulation {
     /// Elastic forces on every node at the current positions (N), with
     /// rotations updated (or the identity when not corotated).
     pub fn elastic_forces(&mut self) -> Vec<[f64; 3]> {
-        let x = self.positions();
+        let x = self.position.clone();
         self.corotation.update(&self.store, &x, self.params.corotated);
         let mut f = vec![[0.0; 3]; x.len()];
         let (store, corotation) = (&self.store, &self.corotation);
@@ -457,8 +485,10 @@ impl Simulation {
         self.analysed = false;
         self.referenced = false;
         self.values = vec![0.0; self.pattern.nnz()];
+        self.boundary = mesh.boundary_triangles();
         self.mesh = mesh;
         self.store = store;
+        self.refresh_positions();
     }
 
     /// Prescribed displacements: fixed regions, then pins; nodes of no
@@ -569,6 +599,7 @@ impl Simulation {
             self.solve_system(&rhs, &mut x)?
         };
         self.displacement = x.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        self.refresh_positions();
         Ok(stats)
     }
 
@@ -594,7 +625,7 @@ impl Simulation {
     fn advance(&mut self) -> Result<StepStats, Error> {
         let h = self.params.dt;
         let n = self.mesh.nodes.len();
-        let x = self.positions();
+        let x = self.position.clone();
         let warp = self.params.corotated;
         let (store, corotation) = (&self.store, &mut self.corotation);
         let rotation_iterations = self.timings.time(Phase::Rotation, || corotation.update(store, &x, warp));
@@ -658,6 +689,7 @@ impl Simulation {
             self.velocity[i] = vi;
             (0..3).for_each(|d| self.displacement[i][d] += h * vi[d]);
         }
+        self.refresh_positions();
         self.steps += 1;
         Ok(StepStats { solve, rotation_iterations, contacts })
     }
