@@ -180,7 +180,13 @@ fn polygon_cut_and_check(mesh: &mut PolyMesh, polygon: &[[f64; 3]]) -> cleave::t
     let before = mesh.clone();
     let report = cleave::topology::cut_by_polygon(mesh, polygon, &SplitOptions::default()).unwrap();
     let v1 = mesh.total_volume();
-    assert!((v1 - v0).abs() <= 1e-12 * v0, "volume {v0} -> {v1} ({:e}), pocket {:?}, {} split", (v1 - v0) / v0, report.pocket.is_some(), report.cut.split.split_elements.len());
+    assert!(
+        (v1 - v0).abs() <= 1e-12 * v0,
+        "volume {v0} -> {v1} ({:e}), pocket {:?}, {} split",
+        (v1 - v0) / v0,
+        report.pocket.is_some(),
+        report.cut.split.split_elements.len()
+    );
     let opts = ValidationOptions { duplicate: 0.0, ..Default::default() };
     let problems = mesh.check(&opts, 5);
     assert!(problems.is_empty(), "{problems:?}");
@@ -203,14 +209,18 @@ fn polygon_cut_and_check(mesh: &mut PolyMesh, polygon: &[[f64; 3]]) -> cleave::t
 /// `SplitOptions::snap` of an edge, at most 1e-4 of these unit meshes).
 fn inside(polygon: &[[f64; 3]], x: [f64; 3]) -> bool {
     let n = polygon.len();
-    let c = polygon.iter().fold([0.0; 3], |m, p| [m[0] + p[0] / n as f64, m[1] + p[1] / n as f64, m[2] + p[2] / n as f64]);
+    let c =
+        polygon.iter().fold([0.0; 3], |m, p| [m[0] + p[0] / n as f64, m[1] + p[1] / n as f64, m[2] + p[2] / n as f64]);
     let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let cross = |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let normal = cross(sub(polygon[1], polygon[0]), sub(polygon[2], polygon[0]));
     let unit = dot(normal, normal).sqrt();
+    let off_plane = dot(sub(x, c), normal).abs() / unit;
+    // these meshes fit in the unit cube: snapping moves at most snap * sqrt(3)
     (0..n).all(|i| dot(cross(sub(polygon[(i + 1) % n], polygon[i]), sub(x, polygon[i])), normal) > 1e-9)
-        && dot(sub(x, c), normal).abs() <= SplitOptions::default().snap * unit.sqrt().max(1.0)
+        && off_plane <= SplitOptions::default().snap * 3f64.sqrt()
 }
 
 #[test]
@@ -245,7 +255,7 @@ fn a_cut_inside_the_body_without_nodes_makes_a_pocket() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(1500))]
+    #![proptest_config(ProptestConfig::with_cases(100))]
 
     #[test]
     fn random_polygon_cuts_keep_the_mesh_valid(
@@ -280,4 +290,30 @@ proptest! {
             prop_assert!(inside(&polygon, mesh.nodes[v as usize]), "node {} outside the polygon was duplicated", v);
         }
     }
+}
+
+#[test]
+fn a_swept_blade_cuts_progressively_while_the_body_moves() {
+    // a clamped bar; a blade enters from the top and advances each step
+    let mesh = box_tet([0.0; 3], [2.0, 0.5, 0.5], [8, 2, 2]).unwrap();
+    let mut sim = Simulation::new(mesh, params()).unwrap();
+    sim.fix(FixedRegion::clamp([-1.0; 3], [1e-3, 1.0, 1.0])).unwrap();
+    let v0 = sim.mesh().total_volume();
+    for step in 0..60 {
+        if (10..20).contains(&step) {
+            // the blade reaches z = 0.5 - depth, over the whole width
+            let depth = 0.035 * (step - 9) as f64;
+            let (z0, z1) = (0.5 - depth, 0.6);
+            let x = 1.3;
+            let polygon = [[x, -0.1, z0], [x, 0.6, z0], [x, 0.6, z1], [x, -0.1, z1]];
+            sim.cut_polygon(&polygon).unwrap();
+        }
+        sim.step().unwrap();
+        assert!(sim.displacements().iter().flatten().all(|u| u.is_finite()), "step {step}");
+    }
+    assert!((sim.mesh().total_volume() - v0).abs() <= 1e-12 * v0);
+    // the blade stopped at 0.35 of the 0.5 m height: the bar still holds
+    let (_, components) = sim.mesh().adjacency().element_components(sim.mesh());
+    assert_eq!(components, 1);
+    println!("after the blade: {} elements, {} nodes", sim.mesh().elements.len(), sim.mesh().nodes.len());
 }

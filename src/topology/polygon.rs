@@ -62,9 +62,9 @@ fn convex_overlap(a: &[[f64; 2]], b: &[[f64; 2]]) -> bool {
             let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
             let axis = [q[1] - p[1], p[0] - q[0]];
             let range = |pts: &[[f64; 2]]| {
-                pts.iter().map(|x| x[0] * axis[0] + x[1] * axis[1]).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                    (lo.min(v), hi.max(v))
-                })
+                pts.iter()
+                    .map(|x| x[0] * axis[0] + x[1] * axis[1])
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
             };
             let ((a0, a1), (b0, b1)) = (range(a), range(b));
             if a1 < b0 || b1 < a0 {
@@ -83,7 +83,11 @@ fn ccw(points: &mut [[f64; 2]]) {
 }
 
 /// Cuts `mesh` with the convex planar polygon `polygon` (see module docs).
-pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOptions) -> Result<PolygonCutReport, SplitError> {
+pub fn cut_by_polygon(
+    mesh: &mut PolyMesh,
+    polygon: &[[f64; 3]],
+    opts: &SplitOptions,
+) -> Result<PolygonCutReport, SplitError> {
     // the polygon's plane and its counter-clockwise 2-D outline
     let n_pts = polygon.len();
     if n_pts < 3 || !polygon.iter().flatten().all(|x| x.is_finite()) {
@@ -165,8 +169,6 @@ pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOpt
     let mut node_faces: HashMap<u32, Vec<u32>> = HashMap::new();
     let on_plane: std::collections::HashSet<u32> =
         in_plane.iter().flat_map(|&f| mesh.faces[f as usize].vertices.iter().copied()).collect();
-    let mut plane_nodes: Vec<u32> = on_plane.iter().copied().collect();
-    plane_nodes.sort_unstable();
     {
         for (f, face) in mesh.faces.iter().enumerate() {
             for &v in &face.vertices {
@@ -203,7 +205,8 @@ pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOpt
             // (vertices on the line, or sign changes); anything else is the
             // line grazing the face within the snapping distance
             let cuts = (0..s.len()).filter(|&j| s[j] == 0 || s[j] * s[(j + 1) % s.len()] < 0).count();
-            if !(s.contains(&1) && s.contains(&-1)) || cuts != 2 {
+            let along_edge = (0..s.len()).any(|j| s[j] == 0 && s[(j + 1) % s.len()] == 0);
+            if !(s.contains(&1) && s.contains(&-1)) || cuts != 2 || along_edge {
                 continue;
             }
             let (mut inside, mut outside) = (Vec::new(), Vec::new());
@@ -223,17 +226,9 @@ pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOpt
                         let (da, db) = (side_of(a2, b2, frame.project(pa)), side_of(a2, b2, frame.project(pb)));
                         let t = da / (da - db);
                         let x = lerp(pa, pb, t);
-                        // a node of the plane already there (within the snapping
-                        // distance) is used instead of a new one: no needles
-                        let near = opts.snap * norm(sub(pb, pa));
-                        if let Some(&q) = plane_nodes.iter().find(|&&q| q != key.0 && q != key.1 && norm(sub(mesh.nodes[q as usize], x)) <= near) {
-                            return q;
-                        }
                         let id = mesh.nodes.len() as u32;
-                        eprintln!("DBG line {i} face {f} {:?} edge {:?} -> node {id} t {t}", lp, key);
                         mesh.nodes.push(x);
                         new_nodes.push(NewNode { id, a: key.0, b: key.1, t });
-                        plane_nodes.push(id);
                         id
                     });
                     inside.push(c);
@@ -251,7 +246,6 @@ pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOpt
                     node_faces.entry(c).or_default().push(f as u32);
                 }
             }
-            eprintln!("DBG split face {f} {:?} s {:?} -> in {:?} out {:?}", lp, s, inside, outside);
             mesh.faces[f] = Face { vertices: inside, triangles: Vec::new() };
             mesh.triangulate_face(f);
             let g = mesh.faces.len() as u32;
@@ -273,17 +267,21 @@ pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOpt
         }
     }
     // 3. inside faces, nodes strictly inside, a pocket if none
-    let inside_polygon = |p: [f64; 2], margin: f64| (0..n_pts).all(|i| side_of(outline[i], outline[(i + 1) % n_pts], p) > margin);
-    let face_centre = |mesh: &PolyMesh, f: u32| frame.project(face_geometry(&mesh.nodes, &mesh.faces[f as usize].vertices).centroid);
+    let inside_polygon =
+        |p: [f64; 2], margin: f64| (0..n_pts).all(|i| side_of(outline[i], outline[(i + 1) % n_pts], p) > margin);
+    let face_centre =
+        |mesh: &PolyMesh, f: u32| frame.project(face_geometry(&mesh.nodes, &mesh.faces[f as usize].vertices).centroid);
     let tol = opts.snap * size;
-    let mut inside_faces: Vec<u32> = in_plane.iter().copied().filter(|&f| inside_polygon(face_centre(mesh, f), -tol)).collect();
+    let mut inside_faces: Vec<u32> =
+        in_plane.iter().copied().filter(|&f| inside_polygon(face_centre(mesh, f), -tol)).collect();
     let node_inside = |mesh: &PolyMesh, v: u32| inside_polygon(frame.project(mesh.nodes[v as usize]), tol);
     let mut pocket = None;
     let has_inner = inside_faces.iter().any(|&f| mesh.faces[f as usize].vertices.iter().any(|&v| node_inside(mesh, v)));
     if !has_inner {
         let c2 = frame.project(centroid);
         let host = inside_faces.iter().copied().find(|&f| {
-            let mut pts: Vec<[f64; 2]> = mesh.faces[f as usize].vertices.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
+            let mut pts: Vec<[f64; 2]> =
+                mesh.faces[f as usize].vertices.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
             ccw(&mut pts);
             (0..pts.len()).all(|i| side_of(pts[i], pts[(i + 1) % pts.len()], c2) > tol)
         });
@@ -331,21 +329,31 @@ pub fn cut_by_polygon(mesh: &mut PolyMesh, polygon: &[[f64; 3]], opts: &SplitOpt
     }
     let side = element_sides(mesh, &plane);
     inside_faces.sort_unstable();
+    // a node opens when it lies strictly inside and every face of the plane
+    // around it is inside (a face left straddling the outline, where the
+    // line grazed it within the snapping distance, keeps its nodes shared)
     let mut inner = vec![false; mesh.nodes.len()];
     for &f in &inside_faces {
         for &v in &mesh.faces[f as usize].vertices {
             inner[v as usize] = node_inside(mesh, v);
         }
     }
-    let (duplicated, renamed) =
-        separate(mesh, &side, |v| inner.get(v as usize).copied().unwrap_or(false), |f| inside_faces.binary_search(&f).is_ok());
+    for &f in &in_plane {
+        if inside_faces.binary_search(&f).is_err() {
+            for &v in &mesh.faces[f as usize].vertices {
+                inner[v as usize] = false;
+            }
+        }
+    }
+    let (duplicated, renamed) = separate(
+        mesh,
+        &side,
+        |v| inner.get(v as usize).copied().unwrap_or(false),
+        |f| inside_faces.binary_search(&f).is_ok(),
+    );
     touched.extend(renamed);
     touched.sort_unstable();
     touched.dedup();
-    let cut = CutReport {
-        split: super::split::SplitReport { new_nodes, ..split },
-        duplicated,
-        touched,
-    };
+    let cut = CutReport { split: super::split::SplitReport { new_nodes, ..split }, duplicated, touched };
     Ok(PolygonCutReport { cut, pocket })
 }
