@@ -172,3 +172,148 @@ fn simulation_runs_on_after_cuts_without_gaining_energy() {
     );
     assert!(components >= 3);
 }
+
+/// Checks a polygon cut: validity of what it touched, volume, and that only
+/// nodes strictly inside the polygon were duplicated.
+fn polygon_cut_and_check(mesh: &mut PolyMesh, polygon: &[[f64; 3]]) -> cleave::topology::PolygonCutReport {
+    let v0 = mesh.total_volume();
+    let before = mesh.clone();
+    let report = cleave::topology::cut_by_polygon(mesh, polygon, &SplitOptions::default()).unwrap();
+    let v1 = mesh.total_volume();
+    assert!(
+        (v1 - v0).abs() <= 1e-12 * v0,
+        "volume {v0} -> {v1} ({:e}), pocket {:?}, {} split",
+        (v1 - v0) / v0,
+        report.pocket.is_some(),
+        report.cut.split.split_elements.len()
+    );
+    let opts = ValidationOptions { duplicate: 0.0, ..Default::default() };
+    let problems = mesh.check(&opts, 5);
+    assert!(problems.is_empty(), "{problems:?}");
+    for e in 0..before.elements.len() {
+        if report.cut.touched.binary_search(&(e as u32)).is_err() {
+            let loops = |m: &PolyMesh| -> Vec<Vec<u32>> {
+                m.elements[e].faces.iter().map(|r| m.faces[r.face as usize].vertices.clone()).collect()
+            };
+            assert_eq!(loops(&before), loops(mesh), "untouched element {e} changed");
+        }
+    }
+    for e in 0..mesh.elements.len() {
+        assert!(mesh.is_convex(e, 1e-3), "element {e} is not convex");
+    }
+    report
+}
+
+/// Whether `x` lies strictly inside the convex polygon and in its plane up
+/// to the snapping distance (nodes that close to a cut plane count as on it:
+/// `SplitOptions::snap` of an edge, at most 1e-4 of these unit meshes).
+fn inside(polygon: &[[f64; 3]], x: [f64; 3]) -> bool {
+    let n = polygon.len();
+    let c =
+        polygon.iter().fold([0.0; 3], |m, p| [m[0] + p[0] / n as f64, m[1] + p[1] / n as f64, m[2] + p[2] / n as f64]);
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let normal = cross(sub(polygon[1], polygon[0]), sub(polygon[2], polygon[0]));
+    let unit = dot(normal, normal).sqrt();
+    let off_plane = dot(sub(x, c), normal).abs() / unit;
+    // these meshes fit in the unit cube: snapping moves at most snap * sqrt(3)
+    (0..n).all(|i| dot(cross(sub(polygon[(i + 1) % n], polygon[i]), sub(x, polygon[i])), normal) > 1e-9)
+        && off_plane <= SplitOptions::default().snap * 3f64.sqrt()
+}
+
+#[test]
+fn a_partial_cut_opens_only_inside_the_polygon() {
+    let mut mesh = box_hex([0.0; 3], [2.0, 1.0, 1.0], [4, 2, 2]).unwrap();
+    // a blade entering from y = 0 to y = 0.6, through the whole height
+    let polygon = [[1.1, -0.1, -0.1], [1.1, 0.6, -0.1], [1.1, 0.6, 1.1], [1.1, -0.1, 1.1]];
+    let report = polygon_cut_and_check(&mut mesh, &polygon);
+    assert!(!report.cut.duplicated.is_empty());
+    for &(v, _) in &report.cut.duplicated {
+        assert!(inside(&polygon, mesh.nodes[v as usize]), "node {v} outside the polygon was duplicated");
+    }
+    // nodes on the plane outside the polygon stay single
+    let on_plane_outside = (0..mesh.nodes.len() as u32)
+        .filter(|&v| (mesh.nodes[v as usize][0] - 1.1).abs() < 1e-12 && mesh.nodes[v as usize][1] > 0.6 + 1e-9)
+        .count();
+    assert!(on_plane_outside > 0);
+    let (_, components) = mesh.adjacency().element_components(&mesh);
+    assert_eq!(components, 1, "the body still holds together beyond the cut");
+}
+
+#[test]
+fn a_cut_inside_the_body_without_nodes_makes_a_pocket() {
+    let mut mesh = box_hex([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+    // a small square in the middle of one cell: no node lies inside it
+    let polygon = [[0.2, 0.2, 0.25], [0.3, 0.2, 0.25], [0.3, 0.3, 0.25], [0.2, 0.3, 0.25]];
+    let report = polygon_cut_and_check(&mut mesh, &polygon);
+    let (pocket, _) = report.pocket.expect("a pocket node");
+    assert!(report.cut.duplicated.iter().any(|&(v, _)| v == pocket), "the pocket node opens");
+    let (_, components) = mesh.adjacency().element_components(&mesh);
+    assert_eq!(components, 1);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(100))]
+
+    #[test]
+    fn random_polygon_cuts_keep_the_mesh_valid(
+        seed in 0u64..10_000,
+        plane in common::plane_strategy(0.2, 0.8),
+        half in (0.1f64..0.6, 0.1f64..0.6),
+        twist in 0.0f64..1.5,
+    ) {
+        let mut mesh = if seed % 2 == 0 {
+            random_convex([0.0; 3], [1.0; 3], 5, seed).unwrap()
+        } else {
+            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
+        };
+        // a rectangle in the plane, centred on its point
+        let n = plane.normal;
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let n = [n[0] / len, n[1] / len, n[2] / len];
+        let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+        let cr = |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+        let u0 = cr(n, a);
+        let l = (u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2]).sqrt();
+        let u0 = [u0[0] / l, u0[1] / l, u0[2] / l];
+        let w0 = cr(n, u0);
+        let (c, s) = (twist.cos(), twist.sin());
+        let u = [c * u0[0] + s * w0[0], c * u0[1] + s * w0[1], c * u0[2] + s * w0[2]];
+        let w = cr(n, u);
+        let p = plane.point;
+        let corner = |a: f64, b: f64| [p[0] + a * u[0] + b * w[0], p[1] + a * u[1] + b * w[1], p[2] + a * u[2] + b * w[2]];
+        let polygon = [corner(-half.0, -half.1), corner(half.0, -half.1), corner(half.0, half.1), corner(-half.0, half.1)];
+        let report = polygon_cut_and_check(&mut mesh, &polygon);
+        for &(v, _) in &report.cut.duplicated {
+            prop_assert!(inside(&polygon, mesh.nodes[v as usize]), "node {} outside the polygon was duplicated", v);
+        }
+    }
+}
+
+#[test]
+fn a_swept_blade_cuts_progressively_while_the_body_moves() {
+    // a clamped bar; a blade enters from the top and advances each step
+    let mesh = box_tet([0.0; 3], [2.0, 0.5, 0.5], [8, 2, 2]).unwrap();
+    let mut sim = Simulation::new(mesh, params()).unwrap();
+    sim.fix(FixedRegion::clamp([-1.0; 3], [1e-3, 1.0, 1.0])).unwrap();
+    let v0 = sim.mesh().total_volume();
+    for step in 0..60 {
+        if (10..20).contains(&step) {
+            // the blade reaches z = 0.5 - depth, over the whole width
+            let depth = 0.035 * (step - 9) as f64;
+            let (z0, z1) = (0.5 - depth, 0.6);
+            let x = 1.3;
+            let polygon = [[x, -0.1, z0], [x, 0.6, z0], [x, 0.6, z1], [x, -0.1, z1]];
+            sim.cut_polygon(&polygon).unwrap();
+        }
+        sim.step().unwrap();
+        assert!(sim.displacements().iter().flatten().all(|u| u.is_finite()), "step {step}");
+    }
+    assert!((sim.mesh().total_volume() - v0).abs() <= 1e-12 * v0);
+    // the blade stopped at 0.35 of the 0.5 m height: the bar still holds
+    let (_, components) = sim.mesh().adjacency().element_components(sim.mesh());
+    assert_eq!(components, 1);
+    println!("after the blade: {} elements, {} nodes", sim.mesh().elements.len(), sim.mesh().nodes.len());
+}

@@ -33,6 +33,36 @@ pub struct Face {
     pub triangles: Vec<[u32; 3]>,
 }
 
+impl Face {
+    /// Inserts node `c`, which lies on the loop edge between `a` and `b`,
+    /// into the loop, and splits the one triangle on that edge in two, so
+    /// the surface the face describes is unchanged (re-triangulating a
+    /// slightly non-planar face would move it). Returns whether the edge was
+    /// found.
+    pub fn insert_on_edge(&mut self, a: u32, b: u32, c: u32) -> bool {
+        let m = self.vertices.len();
+        let Some(p) = (0..m).find(|&p| {
+            let (x, y) = (self.vertices[p], self.vertices[(p + 1) % m]);
+            (x == a && y == b) || (x == b && y == a)
+        }) else {
+            return false;
+        };
+        self.vertices.insert(p + 1, c);
+        for t in 0..self.triangles.len() {
+            let tri = self.triangles[t];
+            for i in 0..3 {
+                let (x, y, z) = (tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]);
+                if (x == a && y == b) || (x == b && y == a) {
+                    self.triangles[t] = [x, c, z];
+                    self.triangles.push([c, y, z]);
+                    return true;
+                }
+            }
+        }
+        true
+    }
+}
+
 /// One element's reference to a global face.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FaceRef {

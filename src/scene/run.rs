@@ -140,8 +140,14 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
             let bar = progress(steps);
             for step in 1..=steps {
                 for cut in s.cut.iter().filter(|c| c.step == step) {
-                    if let Some(p) = &cut.plane {
-                        sim.cut_plane(&Plane { point: p.point, normal: p.normal })?;
+                    match (&cut.plane, &cut.polygon) {
+                        (Some(p), _) => {
+                            sim.cut_plane(&Plane { point: p.point, normal: p.normal })?;
+                        }
+                        (None, Some(polygon)) => {
+                            sim.cut_polygon(polygon)?;
+                        }
+                        (None, None) => {}
                     }
                 }
                 stats.push(sim.step()?.solve);

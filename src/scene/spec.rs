@@ -529,11 +529,15 @@ impl Scene {
                         ));
                     }
                 }
-                (None, Some(_)) => {
-                    return Err(s.unsupported(
-                        &format!("cut.{i}.polygon"),
-                        "polygon (partial) cuts are not implemented yet; use plane",
-                    ))
+                (None, Some(poly)) => {
+                    if poly.len() < 3 || !poly.iter().all(finite3) {
+                        let value = format!("{poly:?}");
+                        return Err(s.invalid(
+                            &format!("cut.{i}.polygon"),
+                            value,
+                            "needs at least 3 finite points (m)",
+                        ));
+                    }
                 }
                 _ => return Err(s.invalid(&format!("cut.{i}"), "…", "give exactly one of plane or polygon")),
             }

@@ -31,7 +31,7 @@ use crate::material::Material;
 use crate::mesh::{PolyMesh, ValidationOptions};
 use crate::solve::{make_solver, solve_checked, LinearSolver, SolveStats, SolverKind};
 use crate::store::{BasisOptions, ElementStore};
-use crate::topology::{cut_by_plane, CutReport, Plane, SplitOptions};
+use crate::topology::{cut_by_plane, cut_by_polygon, CutReport, Plane, PolygonCutReport, SplitOptions};
 use crate::Error;
 
 /// Physical and numerical parameters of a simulation.
@@ -446,32 +446,67 @@ impl Simulation {
         let t = std::time::Instant::now();
         let mut mesh = self.mesh.clone();
         let report = cut_by_plane(&mut mesh, plane, &SplitOptions::default())?;
+        self.apply_cut(mesh, &report, None)?;
+        self.timings.add(Phase::Topology, t.elapsed().as_secs_f64());
+        Ok(report)
+    }
+
+    /// Cuts the body with a convex planar polygon given in the rest frame
+    /// (wicke2007 §5.2): the material opens only inside the polygon, with a
+    /// pocket where no node lies inside it. A swept blade is a sequence of
+    /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
+    pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
+        let t = std::time::Instant::now();
+        let mut mesh = self.mesh.clone();
+        let report = cut_by_polygon(&mut mesh, polygon, &SplitOptions::default())?;
+        self.apply_cut(mesh, &report.cut, report.pocket.as_ref())?;
+        self.timings.add(Phase::Topology, t.elapsed().as_secs_f64());
+        Ok(report)
+    }
+
+    /// Checks the touched elements of a cut mesh, carries the state over to
+    /// the new nodes (in the order they were made: edge nodes, the pocket
+    /// node, then the duplicates) and installs the mesh.
+    fn apply_cut(&mut self, mesh: PolyMesh, report: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<(), Error> {
         // only the touched elements changed (the two sides of a cut carry
         // coincident nodes by design, which a whole-mesh check would flag)
         let touched: Vec<usize> = report.touched.iter().map(|&e| e as usize).collect();
         mesh.check_elements(&touched, &ValidationOptions::default())?;
         let store = ElementStore::build(&mesh, &self.params.material, &self.params.basis)?;
-        let mut state = [
-            std::mem::take(&mut self.displacement),
-            std::mem::take(&mut self.velocity),
-            std::mem::take(&mut self.previous_velocity),
-        ];
+        let mut state = [self.displacement.clone(), self.velocity.clone(), self.previous_velocity.clone()];
+        // new nodes in the order they were made: every parent exists already
+        let mut made: Vec<(u32, Vec<(u32, f64)>)> =
+            report.split.new_nodes.iter().map(|nn| (nn.id, vec![(nn.a, 1.0 - nn.t), (nn.b, nn.t)])).collect();
+        if let Some((id, around)) = pocket {
+            made.push((*id, around.iter().map(|&v| (v, 1.0 / around.len() as f64)).collect()));
+        }
+        made.sort_by_key(|(id, _)| *id);
         for s in &mut state {
-            for nn in &report.split.new_nodes {
-                let (a, b) = (s[nn.a as usize], s[nn.b as usize]);
-                s.push(cleave_kernels::vec3::lerp(a, b, nn.t));
+            for (id, weights) in &made {
+                if *id as usize != s.len() {
+                    return Err(Error::Parameter(format!("internal: new node {id} out of order after a cut")));
+                }
+                let value = weights.iter().fold([0.0; 3], |m, &(v, w)| {
+                    let x = s[v as usize];
+                    [m[0] + w * x[0], m[1] + w * x[1], m[2] + w * x[2]]
+                });
+                s.push(value);
             }
             for &(original, _) in &report.duplicated {
                 s.push(s[original as usize]);
             }
+        }
+        if state[0].len() != mesh.nodes.len() {
+            let message =
+                format!("internal: {} node states for {} nodes after a cut", state[0].len(), mesh.nodes.len());
+            return Err(Error::Parameter(message));
         }
         let [displacement, velocity, previous_velocity] = state;
         self.displacement = displacement;
         self.velocity = velocity;
         self.previous_velocity = previous_velocity;
         self.install(mesh, store);
-        self.timings.add(Phase::Topology, t.elapsed().as_secs_f64());
-        Ok(report)
+        Ok(())
     }
 
     /// Takes a new mesh and its element store: pattern, masses, rotations,

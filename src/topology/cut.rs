@@ -27,7 +27,7 @@ pub struct CutReport {
 /// Side of every element with respect to `plane` (+1 or -1): the side of
 /// its first vertex off the plane (after a split no element straddles it;
 /// an element lying within the snapping distance counts as positive).
-fn element_sides(mesh: &PolyMesh, plane: &Plane) -> Vec<i8> {
+pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane) -> Vec<i8> {
     let n = plane.normal;
     let dist = |v: u32| (0..3).map(|i| (mesh.nodes[v as usize][i] - plane.point[i]) * n[i]).sum::<f64>();
     mesh.elements
@@ -48,7 +48,27 @@ fn element_sides(mesh: &PolyMesh, plane: &Plane) -> Vec<i8> {
 pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<CutReport, SplitError> {
     let split = split_by_plane(mesh, plane, opts)?;
     let side = element_sides(mesh, plane);
-    // nodes used on both sides
+    let (duplicated, mut touched) = separate(mesh, &side, |_| true, |_| true);
+    touched.extend(split.split_elements.iter().flat_map(|&(a, b)| [a, b]));
+    touched.extend(split.repaired_elements.iter().copied());
+    touched.sort_unstable();
+    touched.dedup();
+    Ok(CutReport { split, duplicated, touched })
+}
+
+/// Opens the material between the two sides of a cut: every node that
+/// `may_split(node)` allows and that elements on both sides use is
+/// duplicated, the negative side taking the copy; a face shared by the two
+/// sides is separated (the negative side gets its own copy) when
+/// `separable(face)`, and every other face of the negative side has its
+/// nodes renamed. Returns the `(original, copy)` pairs and the elements
+/// whose faces changed.
+pub(crate) fn separate(
+    mesh: &mut PolyMesh,
+    side: &[i8],
+    may_split: impl Fn(u32) -> bool,
+    separable: impl Fn(u32) -> bool,
+) -> (Vec<(u32, u32)>, Vec<u32>) {
     let mut used = vec![0u8; mesh.nodes.len()];
     for (e, el) in mesh.elements.iter().enumerate() {
         let bit = if side[e] > 0 { 1 } else { 2 };
@@ -59,17 +79,15 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
     let mut copy = vec![u32::MAX; mesh.nodes.len()];
     let mut duplicated = Vec::new();
     for v in 0..used.len() {
-        if used[v] == 3 {
+        if used[v] == 3 && may_split(v as u32) {
             copy[v] = mesh.nodes.len() as u32;
             mesh.nodes.push(mesh.nodes[v]);
             duplicated.push((v as u32, copy[v]));
         }
     }
-    let mut touched: Vec<u32> =
-        split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.repaired_elements.iter().copied()).collect();
+    let mut touched = Vec::new();
     if duplicated.is_empty() {
-        touched.sort_unstable();
-        return Ok(CutReport { split, duplicated, touched });
+        return (duplicated, touched);
     }
     // faces: which sides use each one
     let mut face_sides = vec![0u8; mesh.faces.len()];
@@ -79,7 +97,7 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
         }
     }
     let remap = |v: &u32| if copy[*v as usize] != u32::MAX { copy[*v as usize] } else { *v };
-    let mut separated = vec![u32::MAX; mesh.faces.len()];
+    let mut done = vec![u32::MAX; mesh.faces.len()];
     for e in 0..mesh.elements.len() {
         if side[e] > 0 {
             continue;
@@ -89,22 +107,22 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
             let f = mesh.elements[e].faces[k].face as usize;
             // a duplicated node, or a copy (ids past `copy`) of an earlier rename
             changed |= mesh.faces[f].vertices.iter().any(|&v| copy.get(v as usize).is_none_or(|&c| c != u32::MAX));
-            if face_sides[f] == 3 {
-                // a face on the plane shared with the positive side: the
-                // negative element gets its own copy on the duplicated nodes
-                if separated[f] == u32::MAX {
+            if face_sides[f] == 3 && separable(f as u32) {
+                // shared with the positive side: the negative element gets
+                // its own copy of the face on the duplicated nodes
+                if done[f] == u32::MAX {
                     let face = &mesh.faces[f];
-                    separated[f] = mesh.faces.len() as u32;
+                    done[f] = mesh.faces.len() as u32;
                     let moved = Face {
                         vertices: face.vertices.iter().map(remap).collect(),
                         triangles: face.triangles.iter().map(|t| t.map(|v| remap(&v))).collect(),
                     };
                     mesh.faces.push(moved);
                 }
-                mesh.elements[e].faces[k].face = separated[f];
-            } else if face_sides[f] == 2 && separated[f] == u32::MAX {
+                mesh.elements[e].faces[k].face = done[f];
+            } else if face_sides[f] == 2 && done[f] == u32::MAX {
                 // used by negative elements only: rename its nodes in place
-                separated[f] = f as u32;
+                done[f] = f as u32;
                 let face = &mut mesh.faces[f];
                 face.vertices.iter_mut().for_each(|v| *v = remap(v));
                 face.triangles.iter_mut().for_each(|t| *t = t.map(|v| remap(&v)));
@@ -115,7 +133,5 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
             touched.push(e as u32);
         }
     }
-    touched.sort_unstable();
-    touched.dedup();
-    Ok(CutReport { split, duplicated, touched })
+    (duplicated, touched)
 }

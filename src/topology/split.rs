@@ -64,6 +64,8 @@ pub struct SplitReport {
     /// Elements that were not split but gained nodes or face halves (local
     /// splits only), in increasing order.
     pub repaired_elements: Vec<u32>,
+    /// The cap face of each split element (same order as `split_elements`).
+    pub caps: Vec<u32>,
 }
 
 /// A split that cannot be carried out.
@@ -75,6 +77,9 @@ pub enum SplitError {
     /// An element the plane crosses is not convex enough to split.
     #[error("element {element} is crossed by the plane but is not convex (face {face} lies in the plane)")]
     NonConvexElement { element: usize, face: usize },
+    /// A cut polygon that cannot be used.
+    #[error("the cut polygon {0}")]
+    InvalidPolygon(String),
     /// The cap polygon of an element has fewer than 3 corners.
     #[error("element {element}: the plane crosses it in fewer than 3 points")]
     DegenerateCap { element: usize },
@@ -212,19 +217,13 @@ fn split(
         if face_parts.contains_key(&(f as u32)) {
             continue;
         }
-        let v = &mesh.faces[f].vertices;
-        let mut lp = Vec::with_capacity(v.len() + 2);
+        let v = mesh.faces[f].vertices.clone();
         for i in 0..v.len() {
             let (a, b) = (v[i], v[(i + 1) % v.len()]);
-            lp.push(a);
             if let Some(&c) = edge_node.get(&(a.min(b), a.max(b))) {
-                lp.push(c);
+                mesh.faces[f].insert_on_edge(a, b, c);
+                repaired[f] = true;
             }
-        }
-        if lp.len() != v.len() {
-            mesh.faces[f].vertices = lp;
-            mesh.triangulate_face(f);
-            repaired[f] = true;
         }
     }
     for e in 0..mesh.elements.len() {
@@ -305,12 +304,13 @@ fn split(
         mesh.elements.push(crate::mesh::Element { faces: neg_faces, nodes: Vec::new() });
         mesh.refresh_element_nodes(ne);
         report.split_elements.push((e as u32, ne as u32));
+        report.caps.push(cap);
     }
     Ok(report)
 }
 
 /// Two unit vectors `(u, w)` with `(u, w, n)` right-handed.
-fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+pub(crate) fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
     let u = cross(a, n);
     let u = scale(u, 1.0 / norm(u));

@@ -1,0 +1,359 @@
+//! Progressive cuts with a planar polygon (wicke2007 §5.2).
+//!
+//! 1. The elements that the polygon's plane crosses and whose section
+//!    overlaps the polygon are split locally (their neighbours repaired).
+//! 2. The faces in the plane (the caps, and interior faces that already lay
+//!    in it) are split along the lines of the polygon's edges, so each lies
+//!    inside or outside the polygon; the new nodes join every face on their
+//!    edge.
+//! 3. Nodes strictly inside the polygon are duplicated and the faces inside
+//!    it separated ([`super::cut`]'s separation): the material opens only
+//!    where it was cut. Where no node lies inside, a node at the polygon's
+//!    centroid fans the cap face around it and makes a pocket.
+//!
+//! The polygon must be convex and planar; positions are in the rest frame.
+
+use std::collections::HashMap;
+
+use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
+
+use super::cut::{element_sides, separate, CutReport};
+use super::split::{plane_basis, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions};
+use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
+
+/// What a polygon cut changed, beyond a plane cut's report.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PolygonCutReport {
+    /// Split, new edge nodes (including those on the polygon's edge lines),
+    /// duplicated nodes and touched elements.
+    pub cut: CutReport,
+    /// The pocket node and the face vertices it was placed among (its state
+    /// is their mean), when one was needed.
+    pub pocket: Option<(u32, Vec<u32>)>,
+}
+
+/// 2-D frame of the polygon's plane.
+struct Frame {
+    origin: [f64; 3],
+    u: [f64; 3],
+    w: [f64; 3],
+}
+
+impl Frame {
+    fn project(&self, x: [f64; 3]) -> [f64; 2] {
+        let d = sub(x, self.origin);
+        [dot(d, self.u), dot(d, self.w)]
+    }
+}
+
+/// Signed distance of `p` from the line through `a`, `b`, positive on the
+/// left (the inside of a counter-clockwise polygon).
+fn side_of(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> f64 {
+    let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+    let len = (ex * ex + ey * ey).sqrt();
+    (ex * (p[1] - a[1]) - ey * (p[0] - a[0])) / len
+}
+
+/// Whether two convex polygons (any orientation) overlap, by separating
+/// axes; touching counts as overlapping.
+fn convex_overlap(a: &[[f64; 2]], b: &[[f64; 2]]) -> bool {
+    for poly in [a, b] {
+        for i in 0..poly.len() {
+            let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
+            let axis = [q[1] - p[1], p[0] - q[0]];
+            let range = |pts: &[[f64; 2]]| {
+                pts.iter()
+                    .map(|x| x[0] * axis[0] + x[1] * axis[1])
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
+            };
+            let ((a0, a1), (b0, b1)) = (range(a), range(b));
+            if a1 < b0 || b1 < a0 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Counter-clockwise convex hull order of points (by angle about their mean).
+fn ccw(points: &mut [[f64; 2]]) {
+    let n = points.len() as f64;
+    let c = points.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
+    points.sort_by(|p, q| (p[1] - c[1]).atan2(p[0] - c[0]).total_cmp(&(q[1] - c[1]).atan2(q[0] - c[0])));
+}
+
+/// Cuts `mesh` with the convex planar polygon `polygon` (see module docs).
+pub fn cut_by_polygon(
+    mesh: &mut PolyMesh,
+    polygon: &[[f64; 3]],
+    opts: &SplitOptions,
+) -> Result<PolygonCutReport, SplitError> {
+    // the polygon's plane and its counter-clockwise 2-D outline
+    let n_pts = polygon.len();
+    if n_pts < 3 || !polygon.iter().flatten().all(|x| x.is_finite()) {
+        return Err(SplitError::InvalidPolygon("needs at least 3 finite points".into()));
+    }
+    let centroid = scale(polygon.iter().fold([0.0; 3], |m, p| add(m, *p)), 1.0 / n_pts as f64);
+    let mut area = [0.0; 3];
+    for i in 0..n_pts {
+        area = add(area, cross(sub(polygon[i], centroid), sub(polygon[(i + 1) % n_pts], centroid)));
+    }
+    let len = norm(area);
+    let size = polygon.iter().map(|p| norm(sub(*p, centroid))).fold(0.0, f64::max);
+    if !(len > 1e-12 * size * size) {
+        return Err(SplitError::InvalidPolygon("has no area".into()));
+    }
+    let normal = scale(area, 1.0 / len);
+    if polygon.iter().any(|p| dot(sub(*p, centroid), normal).abs() > 1e-6 * size) {
+        return Err(SplitError::InvalidPolygon("is not planar".into()));
+    }
+    let (u, w) = plane_basis(normal);
+    let frame = Frame { origin: centroid, u, w };
+    let outline: Vec<[f64; 2]> = polygon.iter().map(|p| frame.project(*p)).collect();
+    for i in 0..n_pts {
+        if side_of(outline[i], outline[(i + 1) % n_pts], outline[(i + 2) % n_pts]) <= 0.0 {
+            return Err(SplitError::InvalidPolygon("is not convex".into()));
+        }
+    }
+    let plane = Plane { point: centroid, normal };
+    let dist = |x: [f64; 3]| dot(sub(x, centroid), normal);
+
+    // 1. split the crossed elements whose section overlaps the polygon
+    let chosen: Vec<u32> = (0..mesh.elements.len())
+        .filter(|&e| {
+            let el = &mesh.elements[e];
+            let d: Vec<f64> = el.nodes.iter().map(|&v| dist(mesh.nodes[v as usize])).collect();
+            if !(d.iter().any(|&x| x > 0.0) && d.iter().any(|&x| x < 0.0)) {
+                return false;
+            }
+            // the section: crossings of the element's edges and vertices on the plane
+            let mut section = Vec::new();
+            for r in &el.faces {
+                let lp = &mesh.faces[r.face as usize].vertices;
+                for i in 0..lp.len() {
+                    let (a, b) = (mesh.nodes[lp[i] as usize], mesh.nodes[lp[(i + 1) % lp.len()] as usize]);
+                    let (da, db) = (dist(a), dist(b));
+                    if da == 0.0 {
+                        section.push(frame.project(a));
+                    } else if da * db < 0.0 {
+                        section.push(frame.project(lerp(a, b, da / (da - db))));
+                    }
+                }
+            }
+            section.len() >= 3 && {
+                ccw(&mut section);
+                convex_overlap(&section, &outline)
+            }
+        })
+        .map(|e| e as u32)
+        .collect();
+    let split = split_elements_by_plane(mesh, &plane, &chosen, opts)?;
+    let mut new_nodes = split.new_nodes.clone();
+
+    // 2. the faces in the plane and who uses them
+    let mut in_plane: Vec<u32> = split.caps.clone();
+    let mut users: HashMap<u32, Vec<u32>> = HashMap::new();
+    for (e, el) in mesh.elements.iter().enumerate() {
+        for r in &el.faces {
+            users.entry(r.face).or_default().push(e as u32);
+        }
+    }
+    for (f, face) in mesh.faces.iter().enumerate() {
+        let g = face_geometry(&mesh.nodes, &face.vertices);
+        let flat = face.vertices.iter().all(|&v| dist(mesh.nodes[v as usize]).abs() <= opts.snap * g.diameter);
+        if flat && users.get(&(f as u32)).is_some_and(|u| u.len() == 2) && !in_plane.contains(&(f as u32)) {
+            in_plane.push(f as u32);
+        }
+    }
+    // faces touching each node of the plane (stale entries are re-checked)
+    let mut node_faces: HashMap<u32, Vec<u32>> = HashMap::new();
+    let on_plane: std::collections::HashSet<u32> =
+        in_plane.iter().flat_map(|&f| mesh.faces[f as usize].vertices.iter().copied()).collect();
+    {
+        for (f, face) in mesh.faces.iter().enumerate() {
+            for &v in &face.vertices {
+                if on_plane.contains(&v) {
+                    node_faces.entry(v).or_default().push(f as u32);
+                }
+            }
+        }
+    }
+    let mut edge_node: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut touched_faces: Vec<u32> = Vec::new();
+    for i in 0..n_pts {
+        let (a2, b2) = (outline[i], outline[(i + 1) % n_pts]);
+        let mut k = 0;
+        while k < in_plane.len() {
+            let f = in_plane[k] as usize;
+            k += 1;
+            let lp = mesh.faces[f].vertices.clone();
+            let diameter = face_geometry(&mesh.nodes, &lp).diameter;
+            let s: Vec<i8> = lp
+                .iter()
+                .map(|&v| {
+                    let d = side_of(a2, b2, frame.project(mesh.nodes[v as usize]));
+                    if d.abs() <= opts.snap * diameter {
+                        0
+                    } else if d > 0.0 {
+                        1
+                    } else {
+                        -1
+                    }
+                })
+                .collect();
+            // a proper crossing of a convex face has exactly two cut points
+            // (vertices on the line, or sign changes); anything else is the
+            // line grazing the face within the snapping distance
+            let cuts = (0..s.len()).filter(|&j| s[j] == 0 || s[j] * s[(j + 1) % s.len()] < 0).count();
+            let along_edge = (0..s.len()).any(|j| s[j] == 0 && s[(j + 1) % s.len()] == 0);
+            if !(s.contains(&1) && s.contains(&-1)) || cuts != 2 || along_edge {
+                continue;
+            }
+            let (mut inside, mut outside) = (Vec::new(), Vec::new());
+            for j in 0..lp.len() {
+                let (va, vb) = (lp[j], lp[(j + 1) % lp.len()]);
+                let (sa, sb) = (s[j], s[(j + 1) % lp.len()]);
+                if sa >= 0 {
+                    inside.push(va);
+                }
+                if sa <= 0 {
+                    outside.push(va);
+                }
+                if sa * sb < 0 {
+                    let key = (va.min(vb), va.max(vb));
+                    let c = *edge_node.entry(key).or_insert_with(|| {
+                        let (pa, pb) = (mesh.nodes[key.0 as usize], mesh.nodes[key.1 as usize]);
+                        let (da, db) = (side_of(a2, b2, frame.project(pa)), side_of(a2, b2, frame.project(pb)));
+                        let t = da / (da - db);
+                        let x = lerp(pa, pb, t);
+                        let id = mesh.nodes.len() as u32;
+                        mesh.nodes.push(x);
+                        new_nodes.push(NewNode { id, a: key.0, b: key.1, t });
+                        id
+                    });
+                    inside.push(c);
+                    outside.push(c);
+                    // the new node joins every other face on this edge
+                    for g in node_faces.get(&va).cloned().unwrap_or_default() {
+                        if g as usize == f {
+                            continue;
+                        }
+                        if mesh.faces[g as usize].insert_on_edge(va, vb, c) {
+                            node_faces.entry(c).or_default().push(g);
+                            touched_faces.push(g);
+                        }
+                    }
+                    node_faces.entry(c).or_default().push(f as u32);
+                }
+            }
+            mesh.faces[f] = Face { vertices: inside, triangles: Vec::new() };
+            mesh.triangulate_face(f);
+            let g = mesh.faces.len() as u32;
+            for &v in &outside {
+                node_faces.entry(v).or_default().push(g);
+            }
+            mesh.faces.push(Face { vertices: outside, triangles: Vec::new() });
+            mesh.triangulate_face(g as usize);
+            let face_users = users.get(&(f as u32)).cloned().unwrap_or_default();
+            for &e in &face_users {
+                let r = mesh.elements[e as usize].faces.iter().find(|r| r.face as usize == f).copied();
+                if let Some(r) = r {
+                    mesh.elements[e as usize].faces.push(FaceRef { face: g, outward: r.outward });
+                }
+            }
+            users.insert(g, face_users);
+            touched_faces.push(f as u32);
+            in_plane.push(g);
+        }
+    }
+    // 3. inside faces, nodes strictly inside, a pocket if none
+    let inside_polygon =
+        |p: [f64; 2], margin: f64| (0..n_pts).all(|i| side_of(outline[i], outline[(i + 1) % n_pts], p) > margin);
+    let face_centre =
+        |mesh: &PolyMesh, f: u32| frame.project(face_geometry(&mesh.nodes, &mesh.faces[f as usize].vertices).centroid);
+    let tol = opts.snap * size;
+    let mut inside_faces: Vec<u32> =
+        in_plane.iter().copied().filter(|&f| inside_polygon(face_centre(mesh, f), -tol)).collect();
+    let node_inside = |mesh: &PolyMesh, v: u32| inside_polygon(frame.project(mesh.nodes[v as usize]), tol);
+    let mut pocket = None;
+    let has_inner = inside_faces.iter().any(|&f| mesh.faces[f as usize].vertices.iter().any(|&v| node_inside(mesh, v)));
+    if !has_inner {
+        let c2 = frame.project(centroid);
+        let host = inside_faces.iter().copied().find(|&f| {
+            let mut pts: Vec<[f64; 2]> =
+                mesh.faces[f as usize].vertices.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
+            ccw(&mut pts);
+            (0..pts.len()).all(|i| side_of(pts[i], pts[(i + 1) % pts.len()], c2) > tol)
+        });
+        if let Some(f) = host {
+            let lp = mesh.faces[f as usize].vertices.clone();
+            let c = mesh.nodes.len() as u32;
+            mesh.nodes.push(add(frame.origin, add(scale(frame.u, c2[0]), scale(frame.w, c2[1]))));
+            let fan: Vec<u32> = (0..lp.len())
+                .map(|i| {
+                    let tri = vec![c, lp[i], lp[(i + 1) % lp.len()]];
+                    if i == 0 {
+                        mesh.faces[f as usize] = Face { vertices: tri, triangles: Vec::new() };
+                        mesh.triangulate_face(f as usize);
+                        f
+                    } else {
+                        let g = mesh.faces.len() as u32;
+                        mesh.faces.push(Face { vertices: tri, triangles: Vec::new() });
+                        mesh.triangulate_face(g as usize);
+                        g
+                    }
+                })
+                .collect();
+            for &e in users.get(&f).cloned().unwrap_or_default().iter() {
+                if let Some(r) = mesh.elements[e as usize].faces.iter().find(|r| r.face == f).copied() {
+                    for &g in &fan[1..] {
+                        mesh.elements[e as usize].faces.push(FaceRef { face: g, outward: r.outward });
+                    }
+                }
+            }
+            inside_faces.extend(&fan[1..]);
+            touched_faces.extend(&fan);
+            pocket = Some((c, lp));
+        }
+    }
+    // every element on a touched face gets its node list refreshed
+    let mut touched: Vec<u32> =
+        split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.repaired_elements.iter().copied()).collect();
+    for f in &touched_faces {
+        touched.extend(users.get(f).cloned().unwrap_or_default());
+    }
+    touched.sort_unstable();
+    touched.dedup();
+    for &e in &touched {
+        mesh.refresh_element_nodes(e as usize);
+    }
+    let side = element_sides(mesh, &plane);
+    inside_faces.sort_unstable();
+    // a node opens when it lies strictly inside and every face of the plane
+    // around it is inside (a face left straddling the outline, where the
+    // line grazed it within the snapping distance, keeps its nodes shared)
+    let mut inner = vec![false; mesh.nodes.len()];
+    for &f in &inside_faces {
+        for &v in &mesh.faces[f as usize].vertices {
+            inner[v as usize] = node_inside(mesh, v);
+        }
+    }
+    for &f in &in_plane {
+        if inside_faces.binary_search(&f).is_err() {
+            for &v in &mesh.faces[f as usize].vertices {
+                inner[v as usize] = false;
+            }
+        }
+    }
+    let (duplicated, renamed) = separate(
+        mesh,
+        &side,
+        |v| inner.get(v as usize).copied().unwrap_or(false),
+        |f| inside_faces.binary_search(&f).is_ok(),
+    );
+    touched.extend(renamed);
+    touched.sort_unstable();
+    touched.dedup();
+    let cut = CutReport { split: super::split::SplitReport { new_nodes, ..split }, duplicated, touched };
+    Ok(PolygonCutReport { cut, pocket })
+}
