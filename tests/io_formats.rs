@@ -192,6 +192,10 @@ fn malformed_tetgen_gmsh_vtu_files() {
     let vtu = write(d, "v.vtu", "<VTKFile type=\"UnstructuredGrid\"><UnstructuredGrid><Piece><Points><DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">0 0 0 1 0 0 0 1 0 0 0 1</DataArray></Points><Cells><DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">0 1 2 7</DataArray><DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">4</DataArray><DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">10</DataArray></Cells></Piece></UnstructuredGrid></VTKFile>");
     let (_, msg) = parse_error(read_vtu(&vtu));
     assert!(msg.contains("point 7"), "{msg}");
+    // a polyhedron cell without its faceoffsets entry
+    let poly = write(d, "p.vtu", "<VTKFile type=\"UnstructuredGrid\"><UnstructuredGrid><Piece><Points><DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">0 0 0 1 0 0 0 1 0 0 0 1</DataArray></Points><Cells><DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">0 1 2 3</DataArray><DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">4</DataArray><DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">42</DataArray><DataArray type=\"Int64\" Name=\"faces\" format=\"ascii\">4 3 0 2 1</DataArray><DataArray type=\"Int64\" Name=\"faceoffsets\" format=\"ascii\"></DataArray></Cells></Piece></UnstructuredGrid></VTKFile>");
+    let (_, msg) = parse_error(read_vtu(&poly));
+    assert!(msg.contains("faceoffsets"), "{msg}");
     assert!(matches!(read_mesh(&d.join("missing.mesh")), Err(IoError::Os { .. })));
     assert!(matches!(read_mesh(&d.join("surface.obj")), Err(IoError::Unsupported { .. })));
 }

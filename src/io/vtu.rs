@@ -249,8 +249,12 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                 let (Some(faces), Some(fo)) = (faces, faceoffs) else {
                     return Err(IoError::unsupported(path, "polyhedron cells need 'faces' and 'faceoffsets' arrays"));
                 };
-                let end = as_index(fo, fo.values[c])?;
-                let prev = (0..c).rev().map(|k| fo.values[k]).find(|&v| v >= 0.0).map_or(Ok(0), |v| as_index(fo, v))?;
+                let Some(&end) = fo.values.get(c) else {
+                    return Err(IoError::parse(path, fo.line, format!("faceoffsets has no entry for cell {c}")));
+                };
+                let end = as_index(fo, end)?;
+                let prev =
+                    fo.values[..c].iter().rev().copied().find(|&v| v >= 0.0).map_or(Ok(0), |v| as_index(fo, v))?;
                 if end > faces.values.len() || prev > end {
                     return Err(IoError::parse(path, fo.line, format!("faceoffsets of cell {c} out of range")));
                 }
