@@ -199,3 +199,55 @@ fn malformed_tetgen_gmsh_vtu_files() {
     assert!(matches!(read_mesh(&d.join("missing.mesh")), Err(IoError::Os { .. })));
     assert!(matches!(read_mesh(&d.join("surface.obj")), Err(IoError::Unsupported { .. })));
 }
+
+/// Truncated and corrupted files of every format end in an error (or, by
+/// luck, a valid mesh), never a panic.
+#[test]
+fn damaged_files_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let (nodes, cells) = tet_cells();
+    let mesh = PolyMesh::from_cells(nodes.clone(), &cells).unwrap();
+    let poly = random_convex([0.0; 3], [1.0; 3], 3, 1).unwrap();
+    let files = [
+        ("m.mesh", {
+            write_medit(&dir.path().join("m.mesh"), &nodes, &cells).unwrap();
+            dir.path().join("m.mesh")
+        }),
+        ("m.msh", {
+            write_gmsh(&dir.path().join("m.msh"), &nodes, &cells).unwrap();
+            dir.path().join("m.msh")
+        }),
+        ("m.vtu", {
+            write_vtu(&dir.path().join("m.vtu"), &mesh, &mesh.nodes, &VtuFields::default()).unwrap();
+            dir.path().join("m.vtu")
+        }),
+        ("p.vtu", {
+            write_vtu(&dir.path().join("p.vtu"), &poly, &poly.nodes, &VtuFields::default()).unwrap();
+            dir.path().join("p.vtu")
+        }),
+    ];
+    let mut seed = 12345u64;
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    for (name, path) in files {
+        let bytes = std::fs::read(&path).unwrap();
+        for k in 0..40 {
+            let mut damaged = bytes.clone();
+            if k % 2 == 0 {
+                damaged.truncate((next() as usize) % bytes.len());
+            } else {
+                for _ in 0..3 {
+                    let i = (next() as usize) % damaged.len();
+                    damaged[i] = b"0123456789 .-eE\nx#"[(next() as usize) % 18];
+                }
+            }
+            let p = dir.path().join(format!("d{k}_{name}"));
+            std::fs::write(&p, &damaged).unwrap();
+            let _ = read_mesh(&p); // must return, not panic
+        }
+    }
+}
