@@ -55,3 +55,17 @@ fn a_host_builds_pins_steps_cuts_and_reads_back() {
     assert!(t.rotation > 0.0 && t.assembly > 0.0 && t.solve > 0.0 && t.topology > 0.0);
     assert_eq!(sim.steps(), 40);
 }
+
+#[test]
+fn nodes_of_no_element_are_held_and_do_not_make_the_system_singular() {
+    let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [5.0, 5.0, 5.0]];
+    let mesh = PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3])]).unwrap();
+    let mut sim = Simulation::new(mesh, SimulationParams::default()).unwrap();
+    sim.fix(cleave::sim::FixedRegion::clamp([-1.0; 3], [2.0, 2.0, 1e-3])).unwrap();
+    sim.solve_static().unwrap();
+    assert_eq!(sim.displacements()[4], [0.0; 3]);
+    for _ in 0..3 {
+        sim.step().unwrap();
+    }
+    assert_eq!(sim.displacements()[4], [0.0; 3]);
+}

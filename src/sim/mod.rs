@@ -529,16 +529,11 @@ impl Simulation {
     /// Prescribed displacements: fixed regions, then pins; nodes of no
     /// element are held at rest so the system stays regular.
     fn prescribed(&self) -> Vec<Option<[f64; 3]>> {
-        let n = self.mesh.nodes.len();
-        let mut out = vec![None; n];
-        let mut used = vec![false; n];
-        for el in &self.mesh.elements {
-            for &v in &el.nodes {
-                used[v as usize] = true;
-            }
-        }
+        let mut out = vec![None; self.mesh.nodes.len()];
         for (i, x) in self.mesh.nodes.iter().enumerate() {
-            if !used[i] {
+            // a node of no element has no mass (every element gives its
+            // nodes positive mass fractions)
+            if !(self.masses[i] > 0.0) {
                 out[i] = Some(self.displacement[i]);
             } else if let Some(r) = self.fixed.iter().rev().find(|r| r.contains(*x)) {
                 out[i] = Some(r.value(*x));
