@@ -655,10 +655,9 @@ impl Simulation {
     fn advance(&mut self) -> Result<StepStats, Error> {
         let h = self.params.dt;
         let n = self.mesh.nodes.len();
-        let x = self.position.clone();
         let warp = self.params.corotated;
-        let (store, corotation) = (&self.store, &mut self.corotation);
-        let rotation_iterations = self.timings.time(Phase::Rotation, || corotation.update(store, &x, warp));
+        let (store, corotation, x) = (&self.store, &mut self.corotation, &self.position);
+        let rotation_iterations = self.timings.time(Phase::Rotation, || corotation.update(store, x, warp));
         let c_k = h * h + h * self.params.stiffness_damping;
         let c_m = 1.0 + h * self.params.mass_damping;
         let mut force = vec![[0.0; 3]; n];
@@ -681,7 +680,7 @@ impl Simulation {
         }
         let mut contacts = 0;
         for c in &self.colliders {
-            for (i, xi) in x.iter().enumerate() {
+            for (i, xi) in self.position.iter().enumerate() {
                 let depth = c.depth(*xi);
                 if depth > 0.0 {
                     contacts += 1;
