@@ -16,7 +16,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
-use super::{relative_residual, LinearSolver, SolveError, SolveStats};
+use super::{LinearSolver, SolveError, SolveStats};
 
 /// Direct sparse Cholesky solver.
 #[derive(Default)]
@@ -119,18 +119,6 @@ impl LinearSolver for Cholesky {
         }
         Ok(SolveStats { iterations: 1, residual: f64::NAN })
     }
-}
-
-/// Solves and reports the true relative residual.
-pub fn solve_checked(
-    solver: &mut dyn LinearSolver,
-    a: SparseColMatRef<'_, usize, f64>,
-    b: &[f64],
-    x: &mut [f64],
-) -> Result<SolveStats, SolveError> {
-    let mut stats = solver.solve(a, b, x)?;
-    stats.residual = relative_residual(a, b, x);
-    Ok(stats)
 }
 
 /// METIS nested dissection of the block graph of `pattern` (a repeated

@@ -8,7 +8,7 @@ mod cg;
 mod cholesky;
 
 pub use cg::{dot, symmetric_matvec, ConjugateGradient};
-pub use cholesky::{solve_checked, Cholesky};
+pub use cholesky::Cholesky;
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use thiserror::Error;
@@ -104,6 +104,21 @@ pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterat
         SolverKind::Auto | SolverKind::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
         SolverKind::CgRest => Box::new(ConjugateGradient::new(tolerance, max_iterations).with_rest_preconditioner()),
     }
+}
+
+/// Solves and reports the relative residual: the iterative solver's own,
+/// or, for a direct solver (which reports none), one computed here.
+pub fn solve_checked(
+    solver: &mut dyn LinearSolver,
+    a: SparseColMatRef<'_, usize, f64>,
+    b: &[f64],
+    x: &mut [f64],
+) -> Result<SolveStats, SolveError> {
+    let mut stats = solver.solve(a, b, x)?;
+    if stats.residual.is_nan() {
+        stats.residual = relative_residual(a, b, x);
+    }
+    Ok(stats)
 }
 
 /// Relative residual `|b - A x| / |b|` (`|A x|` when `b` is zero) for
