@@ -17,6 +17,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod elasticity;
+pub mod harmonic;
 pub mod lanes;
 pub mod mean_value;
 pub mod quadrature;

@@ -84,8 +84,9 @@ pub fn boundary_moments(vertices: &[[f64; 3]], triangles: &[[u32; 3]], out: &mut
 }
 
 /// Shifts the gradient table `grad[(3a + i) Q + q]` so that
-/// `Σ_q w_q ∇φ_a(x_q) = ∮ φ_a n` for every `a` (see module docs).
-/// `moments` is scratch of length `k`.
+/// `Σ_q w_q ∇φ_a(x_q) = ∮ φ_a n` for every `a` (see module docs), for
+/// shape functions linear on the surface triangles. `moments` is scratch of
+/// length `k`.
 pub fn consistency_correction(
     vertices: &[[f64; 3]],
     triangles: &[[u32; 3]],
@@ -93,10 +94,17 @@ pub fn consistency_correction(
     grad: &mut [f64],
     moments: &mut [[f64; 3]],
 ) {
-    let (k, nq) = (vertices.len(), weights.len());
+    boundary_moments(vertices, triangles, moments);
+    shift_gradients(weights, grad, moments);
+}
+
+/// Shifts the gradient table `grad[(3a + i) Q + q]` by one vector per
+/// function so that `Σ_q w_q ∇φ_a(x_q) = moments[a]`, the boundary integral
+/// `∮ φ_a n` (m^2) of whatever boundary values the family uses.
+pub fn shift_gradients(weights: &[f64], grad: &mut [f64], moments: &[[f64; 3]]) {
+    let (k, nq) = (moments.len(), weights.len());
     assert_eq!(grad.len(), 3 * k * nq);
     let vol: f64 = weights.iter().sum();
-    boundary_moments(vertices, triangles, moments);
     for a in 0..k {
         for i in 0..3 {
             let row = &mut grad[(3 * a + i) * nq..(3 * a + i + 1) * nq];
@@ -138,16 +146,33 @@ pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
     (x, w)
 }
 
-/// The reference rule: for every surface triangle `(A, B, C)`, the
-/// sub-tetrahedron `(c, A, B, C)` mapped from the unit cube by
-/// `x = c + s (A - c + t (B - A) + t r (C - B))` (Jacobian `6 V s² t`),
-/// with `n` Gauss–Legendre points per direction. Exact for polynomials of
-/// degree `2n - 3`; positive weights; every point strictly inside.
+/// The reference rule: [`cone_rule`] from the centroid.
 pub fn reference_rule(vertices: &[[f64; 3]], triangles: &[[u32; 3]], n: usize) -> (Vec<[f64; 3]>, Vec<f64>) {
     let (_, c) = volume_centroid(vertices, triangles);
+    let mut pts = Vec::new();
+    let mut wts = Vec::new();
+    cone_rule(vertices, triangles, c, n, &mut pts, &mut wts);
+    (pts, wts)
+}
+
+/// Gauss rule on the cone of the surface from `apex`: for every surface
+/// triangle `(A, B, C)`, the sub-tetrahedron `(c, A, B, C)` (`c` the apex)
+/// mapped from the unit cube by `x = c + s (A - c + t (B - A) + t r (C - B))`
+/// (Jacobian `6 V s² t`), with `n` Gauss–Legendre points per direction,
+/// appended to `points`, `weights`. Exact for polynomials of degree
+/// `2n - 3`; the weights are positive and every point strictly inside when
+/// the element is star-shaped with respect to `apex` (every sub-tetrahedron
+/// positive).
+pub fn cone_rule(
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    apex: [f64; 3],
+    n: usize,
+    points: &mut Vec<[f64; 3]>,
+    weights: &mut Vec<f64>,
+) {
+    let c = apex;
     let (g, gw) = gauss_legendre(n);
-    let mut pts = Vec::with_capacity(triangles.len() * n * n * n);
-    let mut wts = Vec::with_capacity(pts.capacity());
     for t in triangles {
         let (a, b, d) = (vertices[t[0] as usize], vertices[t[1] as usize], vertices[t[2] as usize]);
         let six_v = 6.0 * signed_volume(c, a, b, d);
@@ -155,13 +180,12 @@ pub fn reference_rule(vertices: &[[f64; 3]], triangles: &[[u32; 3]], n: usize) -
             for (j, &tt) in g.iter().enumerate() {
                 for (l, &r) in g.iter().enumerate() {
                     let base = add(sub(a, c), add(scale(sub(b, a), tt), scale(sub(d, b), tt * r)));
-                    pts.push(add(c, scale(base, s)));
-                    wts.push(six_v * s * s * tt * gw[i] * gw[j] * gw[l]);
+                    points.push(add(c, scale(base, s)));
+                    weights.push(six_v * s * s * tt * gw[i] * gw[j] * gw[l]);
                 }
             }
         }
     }
-    (pts, wts)
 }
 
 #[cfg(test)]
