@@ -43,7 +43,8 @@ fn mean_value_tetrahedron_equals_the_linear_element() {
 /// Checks symmetry, rigid modes in the null space and positive
 /// semi-definiteness of every element stiffness of `mesh`.
 fn check_element_matrices(mesh: &PolyMesh, rule: QuadratureRule) {
-    let store = ElementStore::build(mesh, &material(), &BasisOptions { quadrature: rule }).unwrap();
+    let store =
+        ElementStore::build(mesh, &material(), &BasisOptions { quadrature: rule, ..Default::default() }).unwrap();
     for b in &store.batches {
         let n = 3 * b.k;
         for i in 0..b.len() {
@@ -112,10 +113,14 @@ fn consistent_rule_passes_the_patch_test() {
     for seed in 0..6 {
         for mesh in [random_convex([0.0; 3], [1.0; 3], 14, seed).unwrap(), mixed_mesh(seed)] {
             let kinds = mesh.count_by_vertex_count().len();
-            let (err, interior) = common::patch_error(mesh.clone(), QuadratureRule::Consistent);
+            let (err, interior) = common::patch_error(
+                mesh.clone(),
+                BasisOptions { quadrature: QuadratureRule::Consistent, ..Default::default() },
+            );
             assert!(interior > 0, "the mesh has interior nodes");
             assert!(err < 1e-9, "seed {seed}: consistent rule patch error {err:e} ({kinds} vertex counts)");
-            let (paper, _) = common::patch_error(mesh, QuadratureRule::Paper);
+            let (paper, _) =
+                common::patch_error(mesh, BasisOptions { quadrature: QuadratureRule::Paper, ..Default::default() });
             worst_paper = worst_paper.max(paper);
         }
     }
@@ -144,7 +149,7 @@ fn cantilever_on_polyhedra_converges_to_the_tetrahedral_limit() {
     for n in [2, 4, 8, 16] {
         let mesh = polyhedral_beam(n);
         let counts = mesh.count_by_vertex_count();
-        let d = common::tip_deflection(mesh);
+        let d = common::tip_deflection(mesh, BasisOptions::default());
         println!("n = {n}: elements by vertex count {counts:?} -> tip deflection {d:.4} m");
         w.push(d);
     }

@@ -5,14 +5,15 @@ use std::path::Path;
 
 use cleave::io::read_mesh;
 use cleave::meshing::box_tet;
-use cleave::store::QuadratureRule;
+use cleave::store::{BasisOptions, QuadratureRule};
 
 mod common;
 
 #[test]
 fn patch_test_on_the_irregular_bunny_tet_mesh() {
     let mesh = read_mesh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/bunny_5k.mesh")).unwrap();
-    let (err, interior) = common::patch_error(mesh, QuadratureRule::Consistent);
+    let (err, interior) =
+        common::patch_error(mesh, BasisOptions { quadrature: QuadratureRule::Consistent, ..Default::default() });
     assert!(interior > 300, "the bunny has interior nodes ({interior})");
     assert!(err < 1e-9, "relative patch test error {err:e}");
 }
@@ -30,7 +31,8 @@ fn patch_test_on_a_perturbed_tet_box() {
         }
     }
     mesh.validate().unwrap();
-    let (err, interior) = common::patch_error(mesh, QuadratureRule::Consistent);
+    let (err, interior) =
+        common::patch_error(mesh, BasisOptions { quadrature: QuadratureRule::Consistent, ..Default::default() });
     assert_eq!(interior, 4 * 4 * 4);
     assert!(err < 1e-9, "relative patch test error {err:e}");
 }

@@ -164,7 +164,7 @@ fn patch_test_passes_after_local_splits() {
         assert!(!report.split_elements.is_empty() && !report.repaired_elements.is_empty());
     }
     mesh.validate().unwrap();
-    let (err, interior) = common::patch_error(mesh, cleave::store::QuadratureRule::Consistent);
+    let (err, interior) = common::patch_error(mesh, cleave::store::BasisOptions::default());
     assert!(interior > 0);
     assert!(err < 1e-9, "patch test error {err:e} after local splits");
 }

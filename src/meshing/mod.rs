@@ -4,5 +4,5 @@
 mod box_grid;
 mod random_convex;
 
-pub use box_grid::{box_hex, box_tet};
+pub use box_grid::{box_hex, box_l_prisms, box_tet, prism};
 pub use random_convex::{clipped_box, random_convex};

@@ -4,13 +4,13 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use super::{BoxElement, Generator, LoadedScene, Mode, Quadrature};
+use super::{BoxElement, Family, Generator, LoadedScene, Mode, Quadrature};
 use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
-use crate::meshing::{box_hex, box_tet, clipped_box, random_convex};
+use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{Collider, FixedRegion, Simulation, SimulationParams};
-use crate::store::{BasisOptions, QuadratureRule};
+use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
 use crate::topology::Plane;
 use crate::Error;
 
@@ -35,6 +35,12 @@ impl LoadedScene {
         match (m.generator, m.element) {
             (Some(Generator::Box), Some(BoxElement::Hex)) => Ok(box_hex(min, max, m.cells.unwrap_or([1; 3]))?),
             (Some(Generator::Box), Some(BoxElement::Tet)) => Ok(box_tet(min, max, m.cells.unwrap_or([1; 3]))?),
+            (Some(Generator::Box), Some(BoxElement::LPrism)) => {
+                Ok(box_l_prisms(min, max, m.cells.unwrap_or([2, 2, 1]))?)
+            }
+            (Some(Generator::Prism), _) => {
+                Ok(prism(m.outline.as_deref().unwrap_or_default(), m.height.unwrap_or(1.0))?)
+            }
             (Some(Generator::Box), Some(BoxElement::RandomConvex)) => {
                 random_convex(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(1))
             }
@@ -70,7 +76,22 @@ impl LoadedScene {
         let params = SimulationParams {
             material: s.material(),
             gravity: sim_spec.gravity,
-            basis: BasisOptions { quadrature },
+            basis: BasisOptions {
+                family: match s.basis.family {
+                    Family::Harmonic => store::Family::Harmonic,
+                    Family::MeanValue | Family::Dg => store::Family::MeanValue,
+                },
+                quadrature,
+                harmonic: {
+                    let d = HarmonicOptions::default();
+                    HarmonicOptions {
+                        offset: s.basis.offset.unwrap_or(d.offset),
+                        edge_samples: s.basis.edge_samples.unwrap_or(d.edge_samples),
+                        quadrature_order: s.basis.quadrature_order.unwrap_or(d.quadrature_order),
+                        ..d
+                    }
+                },
+            },
             dt: sim_spec.dt,
             mass_damping: sim_spec.damping.mass,
             stiffness_damping: sim_spec.damping.stiffness,

@@ -62,6 +62,10 @@ pub struct MeshSpec {
     pub planes: Option<usize>,
     /// Random seed (`random-convex`).
     pub seed: Option<u64>,
+    /// Polygon `[[x, y], ...]` of a `prism` (m), convex or not.
+    pub outline: Option<Vec<[f64; 2]>>,
+    /// Height of a `prism` along z (m).
+    pub height: Option<f64>,
 }
 
 /// Mesh generators.
@@ -70,6 +74,8 @@ pub struct MeshSpec {
 pub enum Generator {
     /// An axis-aligned box.
     Box,
+    /// One element: a polygon `outline` extruded by `height` along z.
+    Prism,
 }
 
 /// Element kinds of a generated box.
@@ -84,6 +90,8 @@ pub enum BoxElement {
     RandomConvex,
     /// The box clipped by random planes into one convex element.
     Clipped,
+    /// Non-convex L-shaped prisms and hexahedra (cells even in x and y).
+    LPrism,
 }
 
 /// `[meshing]` for surface input.
@@ -124,11 +132,25 @@ pub struct BasisSpec {
     /// Quadrature of mean value elements.
     #[serde(default)]
     pub quadrature: Quadrature,
+    /// Harmonic only: kernel offset relative to the element size (0.1).
+    pub offset: Option<f64>,
+    /// Harmonic only: kernel samples inside every edge (3).
+    pub edge_samples: Option<usize>,
+    /// Harmonic only: Gauss points per direction on each sub-tetrahedron (2).
+    pub quadrature_order: Option<usize>,
 }
 
 impl Default for BasisSpec {
     fn default() -> Self {
-        BasisSpec { family: Family::MeanValue, degree: None, flux: None, quadrature: Quadrature::Consistent }
+        BasisSpec {
+            family: Family::MeanValue,
+            degree: None,
+            flux: None,
+            quadrature: Quadrature::Consistent,
+            offset: None,
+            edge_samples: None,
+            quadrature_order: None,
+        }
     }
 }
 
@@ -410,7 +432,7 @@ impl Scene {
                         return Err(s.invalid(
                             "mesh",
                             "box",
-                            "a box generator needs element = \"hex\" | \"tet\" | \"random-convex\" | \"clipped\"",
+                            "a box generator needs element = \"hex\" | \"tet\" | \"l-prism\" | \"random-convex\" | \"clipped\"",
                         ))
                     }
                     Some(BoxElement::RandomConvex | BoxElement::Clipped) => {
@@ -431,6 +453,20 @@ impl Scene {
                     }
                 }
             }
+            (None, Some(Generator::Prism)) => {
+                let outline = m.outline.as_deref().unwrap_or_default();
+                if outline.len() < 3 || outline.iter().flatten().any(|x| !x.is_finite()) {
+                    return Err(s.invalid(
+                        "mesh.outline",
+                        "…",
+                        "a prism needs an outline of at least 3 finite [x, y] points (m)",
+                    ));
+                }
+                let height = m.height.unwrap_or(f64::NAN);
+                if !(height > 0.0 && height.is_finite()) {
+                    return Err(s.invalid("mesh.height", height, "a prism needs a finite height > 0 (m)"));
+                }
+            }
             (Some(_), None) => {}
         }
         if self.meshing.is_some() {
@@ -439,12 +475,36 @@ impl Scene {
         let mat = &self.material;
         Material::new(mat.young, mat.poisson, mat.density)
             .map_err(|e| s.invalid(&format!("material.{}", e.name), e.value, e.allowed))?;
-        match self.basis.family {
-            Family::MeanValue => {}
-            Family::Harmonic | Family::Dg => {
-                return Err(
-                    s.unsupported("basis.family", "only \"mean-value\" (linear on tetrahedra) is implemented yet")
-                )
+        let b = &self.basis;
+        match b.family {
+            Family::MeanValue => {
+                if b.offset.is_some() || b.edge_samples.is_some() || b.quadrature_order.is_some() {
+                    return Err(s.invalid(
+                        "basis.offset",
+                        "…",
+                        "offset, edge_samples and quadrature_order apply to family = \"harmonic\" only",
+                    ));
+                }
+            }
+            Family::Harmonic => {
+                if let Some(o) = b.offset {
+                    if !(o > 0.0 && o <= 1.0) {
+                        return Err(s.invalid("basis.offset", o, "must be in (0, 1] (fraction of the element size)"));
+                    }
+                }
+                if let Some(n) = b.edge_samples {
+                    if !(1..=10).contains(&n) {
+                        return Err(s.invalid("basis.edge_samples", n, "must be in 1..=10"));
+                    }
+                }
+                if let Some(n) = b.quadrature_order {
+                    if !(1..=6).contains(&n) {
+                        return Err(s.invalid("basis.quadrature_order", n, "must be in 1..=6"));
+                    }
+                }
+            }
+            Family::Dg => {
+                return Err(s.unsupported("basis.family", "only \"mean-value\" and \"harmonic\" are implemented yet"))
             }
         }
         if self.basis.degree.is_some() || self.basis.flux.is_some() {

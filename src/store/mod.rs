@@ -7,11 +7,20 @@
 //! gradients at the element's stress point (`k`). Kernels run over a batch
 //! as over plain slices; a batch is rebuilt alone when its elements change.
 //!
-//! Tetrahedra form the `k = 4` batch and use the closed form ([`tet`]); all
-//! other convex elements use mean value shape functions ([`mean_value`]).
+//! Tetrahedra form the `k = 4` batch and use the closed form ([`tet`]). The
+//! other elements use the scene's family: mean value shape functions on
+//! convex elements ([`mean_value`]), or harmonic ones on any planar-faced
+//! element ([`harmonic`]), where hexahedra keep the closed-form trilinear
+//! basis ([`trilinear`]).
 
+pub mod harmonic;
 mod mean_value;
 mod tet;
+mod trilinear;
+
+use rayon::prelude::*;
+
+pub use harmonic::HarmonicOptions;
 
 use thiserror::Error;
 
@@ -30,6 +39,38 @@ pub enum BasisError {
     /// The element is flat or inverted at rest.
     #[error("element {element} is degenerate (volume {volume:.3e} m^3)")]
     DegenerateElement { element: usize, volume: f64 },
+    /// No interior point sees the whole boundary, so the element cannot be
+    /// split into positive sub-tetrahedra for its quadrature.
+    #[error("element {element} is not star-shaped; split it into star-shaped parts")]
+    NotStarShaped { element: usize },
+    /// The MFS least-squares system is rank deficient (coincident kernels
+    /// or a degenerate face).
+    #[error("the harmonic basis of element {element} cannot be fitted (degenerate face or element)")]
+    HarmonicFit { element: usize },
+}
+
+/// How the elements of a batch are represented.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ElementKind {
+    /// Closed-form linear tetrahedra (no stored `K_e`).
+    #[default]
+    LinearTet,
+    /// Mean value shape functions (wicke2007).
+    MeanValue,
+    /// Closed-form trilinear hexahedra (harmonic family).
+    Trilinear,
+    /// Harmonic shape functions by MFS (martin2008).
+    Harmonic,
+}
+
+/// The shape function family of the elements other than tetrahedra.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Family {
+    /// Mean value coordinates; every element must be convex.
+    #[default]
+    MeanValue,
+    /// Harmonic coordinates; hexahedra trilinear, any planar-faced element.
+    Harmonic,
 }
 
 /// All elements with `k` nodes, as structure of arrays.
@@ -37,6 +78,8 @@ pub enum BasisError {
 pub struct Batch {
     /// Nodes per element.
     pub k: usize,
+    /// Representation of the batch's elements.
+    pub kind: ElementKind,
     /// Mesh element id of each batch entry.
     pub elements: Vec<u32>,
     /// Node ids, `k` per element (element-local order).
@@ -158,10 +201,14 @@ pub enum QuadratureRule {
 }
 
 /// Options of the basis construction.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BasisOptions {
+    /// Family of the elements that are not tetrahedra.
+    pub family: Family,
     /// Quadrature of mean value elements.
     pub quadrature: QuadratureRule,
+    /// Fit and quadrature of harmonic elements.
+    pub harmonic: HarmonicOptions,
 }
 
 /// Every element of a mesh, batched by vertex count.
@@ -177,19 +224,43 @@ impl ElementStore {
     /// Builds the store: gathers every element into its batch and computes
     /// volumes, mass fractions, `K_e` and stress-point gradients.
     pub fn build(mesh: &PolyMesh, material: &Material, options: &BasisOptions) -> Result<Self, BasisError> {
-        let mut by_k: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
+        let mut by_kind: std::collections::BTreeMap<(ElementKind, usize), Vec<u32>> = Default::default();
         for (e, el) in mesh.elements.iter().enumerate() {
-            by_k.entry(el.nodes.len()).or_default().push(e as u32);
+            let k = el.nodes.len();
+            let kind = match (k, options.family) {
+                (4, _) => ElementKind::LinearTet,
+                (_, Family::MeanValue) => ElementKind::MeanValue,
+                (_, Family::Harmonic)
+                    if options.harmonic.trilinear_hexahedra && trilinear::hex_corners(mesh, e).is_some() =>
+                {
+                    ElementKind::Trilinear
+                }
+                (_, Family::Harmonic) => ElementKind::Harmonic,
+            };
+            by_kind.entry((kind, k)).or_default().push(e as u32);
         }
+        let face_bases = if by_kind.keys().any(|(kind, _)| *kind == ElementKind::Harmonic) {
+            let harmonic: Vec<u32> = by_kind
+                .iter()
+                .filter(|((kind, _), _)| *kind == ElementKind::Harmonic)
+                .flat_map(|(_, v)| v.iter().copied())
+                .collect();
+            harmonic::face_bases(mesh, &harmonic, &options.harmonic)?
+        } else {
+            Vec::new()
+        };
         let mut store = ElementStore { batches: Vec::new(), locate: vec![(0, 0); mesh.elements.len()] };
-        for (b, (k, elements)) in by_k.into_iter().enumerate() {
+        for (b, ((kind, k), elements)) in by_kind.into_iter().enumerate() {
             for (i, &e) in elements.iter().enumerate() {
                 store.locate[e as usize] = (b as u32, i as u32);
             }
-            let batch = if k == 4 {
-                tet::build_batch(mesh, material, elements)?
-            } else {
-                mean_value::build_batch(mesh, material, options.quadrature, k, elements)?
+            let batch = match kind {
+                ElementKind::LinearTet => tet::build_batch(mesh, material, elements)?,
+                ElementKind::MeanValue => mean_value::build_batch(mesh, material, options.quadrature, k, elements)?,
+                ElementKind::Trilinear => trilinear::build_batch(mesh, material, elements)?,
+                ElementKind::Harmonic => {
+                    harmonic::build_batch(mesh, material, &face_bases, &options.harmonic, k, elements)?
+                }
             };
             store.batches.push(batch);
         }
@@ -235,4 +306,105 @@ impl ElementStore {
         }
         out
     }
+}
+
+/// The slots of one element in a batch being built.
+pub(crate) struct Slots<'a> {
+    /// Mesh element id.
+    pub element: usize,
+    /// Rest positions of the element's nodes (m), element-local order.
+    pub verts: &'a [[f64; 3]],
+    /// Outward surface triangles in local indices (empty if not gathered).
+    pub triangles: &'a [[u32; 3]],
+    pub volume: &'a mut f64,
+    pub mass_fraction: &'a mut [f64],
+    pub stiffness: &'a mut [f64],
+    pub stress_grads: &'a mut [[f64; 3]],
+    pub points: &'a mut [[f64; 3]],
+    pub weights: &'a mut [f64],
+}
+
+/// Gathers the batch of `k`-node `elements` (nodes, rest positions and, when
+/// `with_triangles`, the `2k - 4` outward surface triangles in local
+/// indices) and fills every element's slots in parallel, with
+/// per-thread scratch from `scratch`, by `build`; `nq` quadrature points per element.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fill_batch<S>(
+    mesh: &PolyMesh,
+    material: &Material,
+    kind: ElementKind,
+    k: usize,
+    nq: usize,
+    elements: Vec<u32>,
+    with_triangles: bool,
+    scratch: impl Fn() -> S + Sync + Send,
+    build: impl Fn(&mut S, Slots) -> Result<(), BasisError> + Sync + Send,
+) -> Result<Batch, BasisError> {
+    let n = elements.len();
+    let nodes: Vec<u32> = elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()).collect();
+    let rest: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
+    let nt = if with_triangles { 2 * k - 4 } else { 0 };
+    let mut triangles = vec![[0u32; 3]; n * nt];
+    if with_triangles {
+        for (i, &e) in elements.iter().enumerate() {
+            let local = &nodes[i * k..(i + 1) * k];
+            let tris: Vec<[u32; 3]> = mesh
+                .element_triangles(e as usize)
+                .map(|t| t.map(|g| local.binary_search(&g).expect("triangle vertex is an element node") as u32))
+                .collect();
+            if tris.len() != nt {
+                // a closed triangulated sphere with k vertices has 2k - 4 triangles
+                let volume = mesh.element_volume(e as usize);
+                return Err(BasisError::DegenerateElement { element: e as usize, volume });
+            }
+            triangles[i * nt..(i + 1) * nt].copy_from_slice(&tris);
+        }
+    }
+    let mut volume = vec![0.0; n];
+    let mut mass_fraction = vec![0.0; n * k];
+    let mut stiffness = vec![0.0; n * 9 * k * k];
+    let mut stress_grads = vec![[0.0; 3]; n * k];
+    let mut points = vec![[0.0; 3]; n * nq];
+    let mut weights = vec![0.0; n * nq];
+    volume
+        .par_iter_mut()
+        .zip(mass_fraction.par_chunks_mut(k))
+        .zip(stiffness.par_chunks_mut(9 * k * k))
+        .zip(stress_grads.par_chunks_mut(k))
+        .zip(points.par_chunks_mut(nq.max(1)))
+        .zip(weights.par_chunks_mut(nq.max(1)))
+        .enumerate()
+        .try_for_each_init(
+            &scratch,
+            |s, (i, (((((volume, mass_fraction), stiffness), stress_grads), points), weights))| {
+                let slots = Slots {
+                    element: elements[i] as usize,
+                    verts: &rest[i * k..(i + 1) * k],
+                    triangles: &triangles[i * nt..(i + 1) * nt],
+                    volume,
+                    mass_fraction,
+                    stiffness,
+                    stress_grads,
+                    points,
+                    weights,
+                };
+                build(s, slots)
+            },
+        )?;
+    Ok(Batch {
+        k,
+        kind,
+        elements,
+        nodes,
+        rest,
+        volume,
+        mass_fraction,
+        stiffness,
+        lame: material.lame(),
+        stress_grads,
+        triangles,
+        points,
+        weights,
+        points_per_element: nq,
+    })
 }

@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use super::{BasisError, Batch};
+use super::{BasisError, Batch, ElementKind};
 use crate::material::Material;
 use crate::mesh::PolyMesh;
 
@@ -33,6 +33,7 @@ pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u3
     })?;
     Ok(Batch {
         k,
+        kind: ElementKind::LinearTet,
         elements,
         nodes,
         rest,

@@ -6,7 +6,7 @@ use cleave::mesh::PolyMesh;
 use cleave::meshing::box_tet;
 use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
-use cleave::store::{BasisOptions, QuadratureRule};
+use cleave::store::BasisOptions;
 use cleave::topology::Plane;
 use proptest::prelude::*;
 
@@ -18,9 +18,9 @@ pub fn linear_field(x: [f64; 3]) -> [f64; 3] {
 }
 
 /// The patch test: boundary nodes pinned to [`linear_field`], no body
-/// force, static solve with `rule`. Returns the largest nodal error
+/// force, static solve with the basis `basis`. Returns the largest nodal error
 /// relative to the field's size, and the number of interior nodes.
-pub fn patch_error(mesh: PolyMesh, rule: QuadratureRule) -> (f64, usize) {
+pub fn patch_error(mesh: PolyMesh, basis: BasisOptions) -> (f64, usize) {
     let adj = mesh.adjacency();
     let mut boundary = vec![false; mesh.nodes.len()];
     for (f, face) in mesh.faces.iter().enumerate() {
@@ -29,7 +29,7 @@ pub fn patch_error(mesh: PolyMesh, rule: QuadratureRule) -> (f64, usize) {
         }
     }
     let interior = boundary.iter().filter(|&&b| !b).count();
-    let params = SimulationParams { gravity: [0.0; 3], basis: BasisOptions { quadrature: rule }, ..Default::default() };
+    let params = SimulationParams { gravity: [0.0; 3], basis, ..Default::default() };
     let mut sim = Simulation::new(mesh, params).unwrap();
     for (i, &b) in boundary.iter().enumerate() {
         if b {
@@ -61,9 +61,10 @@ pub fn plane_strategy(lo: f64, hi: f64) -> impl Strategy<Value = Plane> {
 
 /// Mean vertical deflection (m, positive down) of the tip face x = 4 of the
 /// 4 x 1 x 1 m beam `mesh` clamped at x = 0 under self-weight
-/// (E = 1e5 Pa, nu = 0.3, rho = 1000 kg/m^3).
-pub fn tip_deflection(mesh: PolyMesh) -> f64 {
+/// (E = 1e5 Pa, nu = 0.3, rho = 1000 kg/m^3) with the basis `basis`.
+pub fn tip_deflection(mesh: PolyMesh, basis: BasisOptions) -> f64 {
     let params = SimulationParams {
+        basis,
         material: Material::new(1e5, 0.3, 1000.0).unwrap(),
         solver: SolverKind::Cholesky,
         ..Default::default()
@@ -85,7 +86,10 @@ pub fn tip_deflection(mesh: PolyMesh) -> f64 {
 
 /// Tip deflections of the tetrahedral beams with 2, 4, 8, 16 cells across.
 pub fn tet_sequence() -> Vec<f64> {
-    [2, 4, 8, 16].iter().map(|&n| tip_deflection(box_tet([0.0; 3], [4.0, 1.0, 1.0], [4 * n, n, n]).unwrap())).collect()
+    [2, 4, 8, 16]
+        .iter()
+        .map(|&n| tip_deflection(box_tet([0.0; 3], [4.0, 1.0, 1.0], [4 * n, n, n]).unwrap(), BasisOptions::default()))
+        .collect()
 }
 
 /// Observed convergence rates of a sequence on meshes halved each time, and

@@ -1,0 +1,219 @@
+//! The 3D MFS fit of one element's harmonic shape functions (martin2008 §5).
+//!
+//! Kernel centres (`1/r`) come from samples of the element's nodes, edges
+//! (`edge_samples` inside each) and faces (a grid of the same spacing), each
+//! moved outward by `offset` times the element's diameter along the
+//! (averaged) outward normal; centres that land inside a non-convex element,
+//! too close to its surface or to another centre are dropped. Collocation
+//! points sample the same places three times as densely; their targets are
+//! `δ_ab` at nodes, the hat functions on edges and the shared face functions
+//! inside faces. One QR factorisation serves all `k` functions.
+
+use std::collections::BTreeMap;
+
+use cleave_kernels::harmonic::MfsFunctions;
+use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
+
+use super::face::{place_centres, FaceBasis};
+use super::mfs::fit;
+use super::HarmonicOptions;
+use crate::mesh::face_geometry;
+use crate::mesh::PolyMesh;
+
+/// Spacing of the face samples relative to the edge samples': the face
+/// functions are smooth inside faces, so sparser kernels there cost little
+/// accuracy and keep the least-squares system small.
+const FACE_SPACING: f64 = 2.0;
+
+/// The fitted shape functions of one element, in world units.
+#[derive(Clone, Debug)]
+pub struct ElementBasis {
+    /// Kernel centres (m).
+    pub centres: Vec<[f64; 3]>,
+    /// Kernel weights (m), row-major `n x k`.
+    pub weights: Vec<f64>,
+    /// Linear parts `[c (1/m), d]`, one per node (element-local order).
+    pub linear: Vec<[f64; 4]>,
+    /// Origin of the linear parts (m).
+    pub origin: [f64; 3],
+    /// Largest deviation `|N_a(c) - b_a(c)|` at the collocation points: the
+    /// MFS fit error of the boundary values (dimensionless).
+    pub boundary_error: f64,
+    /// Root mean square of the same deviations.
+    pub boundary_rms: f64,
+}
+
+impl ElementBasis {
+    /// The functions in the layout of the evaluation kernel.
+    pub fn functions(&self) -> MfsFunctions<'_> {
+        MfsFunctions { centres: &self.centres, weights: &self.weights, linear: &self.linear, origin: self.origin }
+    }
+}
+
+/// Generalised winding number of the closed surface `triangles` around `p`
+/// (1 inside, 0 outside): the sum of the triangles' solid angles over 4π
+/// (Van Oosterom & Strackee).
+fn winding_number(verts: &[[f64; 3]], triangles: &[[u32; 3]], p: [f64; 3]) -> f64 {
+    let mut omega = 0.0;
+    for t in triangles {
+        let [a, b, c] = t.map(|i| sub(verts[i as usize], p));
+        let (la, lb, lc) = (norm(a), norm(b), norm(c));
+        let num = dot(a, cross(b, c));
+        let den = la * lb * lc + dot(a, b) * lc + dot(a, c) * lb + dot(b, c) * la;
+        omega += 2.0 * num.atan2(den);
+    }
+    omega / (4.0 * std::f64::consts::PI)
+}
+
+/// Distance from `p` to the triangle `t`.
+fn triangle_distance(t: [[f64; 3]; 3], p: [f64; 3]) -> f64 {
+    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+    let nn = dot(n, n);
+    if nn > 0.0 {
+        let d = dot(sub(p, t[0]), n) / nn;
+        let q = sub(p, scale(n, d));
+        let inside = (0..3).all(|i| dot(cross(sub(t[(i + 1) % 3], t[i]), sub(q, t[i])), n) >= 0.0);
+        if inside {
+            return d.abs() * nn.sqrt();
+        }
+    }
+    (0..3)
+        .map(|i| {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            let d = sub(b, a);
+            let s = (dot(sub(p, a), d) / dot(d, d).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+            norm(sub(p, add(a, scale(d, s))))
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+    let l = norm(v);
+    (l > 1e-9).then(|| scale(v, 1.0 / l))
+}
+
+/// Fits the shape functions of element `e`; `faces[f]` are the face
+/// functions of every face of the element. `None` when the fit fails.
+pub fn element_basis(
+    mesh: &PolyMesh,
+    e: usize,
+    faces: &[Option<FaceBasis>],
+    options: &HarmonicOptions,
+) -> Option<ElementBasis> {
+    let el = &mesh.elements[e];
+    let k = el.nodes.len();
+    let x: Vec<[f64; 3]> = el.nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
+    let local = |v: u32| el.nodes.binary_search(&v).expect("face vertex is an element node");
+    let origin = scale(x.iter().fold([0.0; 3], |acc, p| add(acc, *p)), 1.0 / k as f64);
+    let size = mesh.element_diameter(e);
+    let hat = |p: [f64; 3]| scale(sub(p, origin), 1.0 / size);
+    let triangles: Vec<[u32; 3]> = mesh.element_triangles(e).map(|t| t.map(|v| local(v) as u32)).collect();
+    // outward unit normals of faces, edges and nodes
+    let mut node_normal = vec![[0.0; 3]; k];
+    let mut edges: BTreeMap<(usize, usize), [f64; 3]> = BTreeMap::new();
+    let mut face_normals = Vec::with_capacity(el.faces.len());
+    for r in &el.faces {
+        let face = &mesh.faces[r.face as usize];
+        let n = face_geometry(&mesh.nodes, &face.vertices).normal;
+        let n = if r.outward { n } else { scale(n, -1.0) };
+        face_normals.push(n);
+        let m = face.vertices.len();
+        for i in 0..m {
+            let (a, b) = (local(face.vertices[i]), local(face.vertices[(i + 1) % m]));
+            node_normal[a] = add(node_normal[a], n);
+            let en = edges.entry((a.min(b), a.max(b))).or_insert([0.0; 3]);
+            *en = add(*en, n);
+        }
+    }
+    let mean_edge = edges.keys().map(|&(a, b)| norm(sub(x[a], x[b]))).sum::<f64>() / edges.len() as f64;
+    let h = mean_edge / (options.edge_samples + 1) as f64;
+    // kernel samples in scaled coordinates
+    let mut samples = Vec::new();
+    for (a, n) in node_normal.iter().enumerate() {
+        if let Some(n) = unit(*n) {
+            samples.push((hat(x[a]), n));
+        }
+    }
+    let edge_points = |(a, b): (usize, usize), count: usize| {
+        let (pa, pb) = (x[a], x[b]);
+        (1..=count).map(move |s| {
+            let t = s as f64 / (count + 1) as f64;
+            (add(pa, scale(sub(pb, pa), t)), t)
+        })
+    };
+    for (&ab, n) in &edges {
+        if let Some(n) = unit(*n) {
+            samples.extend(edge_points(ab, options.edge_samples).map(|(p, _)| (hat(p), n)));
+        }
+    }
+    for (r, n) in el.faces.iter().zip(&face_normals) {
+        let f = r.face as usize;
+        faces[f]
+            .as_ref()?
+            .interior_samples(&mesh.nodes, &mesh.faces[f], FACE_SPACING * h, |p, _| samples.push((hat(p), *n)));
+    }
+    let scaled: Vec<[f64; 3]> = x.iter().map(|&p| hat(p)).collect();
+    let centres = place_centres(samples, options.offset, |c| {
+        (winding_number(&scaled, &triangles, c) < 0.5).then(|| {
+            triangles.iter().map(|t| triangle_distance(t.map(|i| scaled[i as usize]), c)).fold(f64::INFINITY, f64::min)
+        })
+    });
+    // collocation points and targets
+    let mut colloc = Vec::new();
+    let mut targets = Vec::new();
+    for (a, p) in scaled.iter().enumerate() {
+        colloc.push(*p);
+        targets.extend((0..k).map(|b| if a == b { 1.0 } else { 0.0 }));
+    }
+    let dense = 3 * (options.edge_samples + 1) - 1;
+    for &(a, b) in edges.keys() {
+        for (p, t) in edge_points((a, b), dense) {
+            colloc.push(hat(p));
+            targets.extend((0..k).map(|c| {
+                if c == a {
+                    1.0 - t
+                } else if c == b {
+                    t
+                } else {
+                    0.0
+                }
+            }));
+        }
+    }
+    for r in &el.faces {
+        let f = r.face as usize;
+        let face = &mesh.faces[f];
+        let at: Vec<usize> = face.vertices.iter().map(|&v| local(v)).collect();
+        faces[f].as_ref()?.interior_samples(&mesh.nodes, face, FACE_SPACING * h / 3f64.sqrt(), |p, vals| {
+            colloc.push(hat(p));
+            let row = targets.len();
+            targets.resize(row + k, 0.0);
+            for (&a, v) in at.iter().zip(vals) {
+                targets[row + a] = *v;
+            }
+        });
+    }
+    let fitted = fit::<3>(centres, &colloc, &targets, &scaled)?;
+    let n = fitted.centres.len();
+    let (mut max_err, mut sum_sq) = (0.0f64, 0.0);
+    let mut vals = vec![0.0; k];
+    for (p, t) in colloc.iter().zip(targets.chunks(k)) {
+        fitted.values(*p, &mut vals);
+        for (v, t) in vals.iter().zip(t) {
+            max_err = max_err.max((v - t).abs());
+            sum_sq += (v - t) * (v - t);
+        }
+    }
+    // back to world units: 1/|x̂ - k̂| = s/|x - k|, c·x̂ = (c/s)·(x - o)
+    let c = &fitted.coefficients;
+    Some(ElementBasis {
+        centres: fitted.centres.iter().map(|&p| add(origin, scale(p, size))).collect(),
+        weights: c[..n * k].iter().map(|w| w * size).collect(),
+        linear: (0..k)
+            .map(|a| [c[n * k + a] / size, c[(n + 1) * k + a] / size, c[(n + 2) * k + a] / size, c[(n + 3) * k + a]])
+            .collect(),
+        origin,
+        boundary_error: max_err,
+        boundary_rms: (sum_sq / targets.len() as f64).sqrt(),
+    })
+}

@@ -1,0 +1,202 @@
+//! Harmonic elements (martin2008 §4-6): shape functions harmonic inside
+//! each element and equal to the shared face functions on its boundary,
+//! fitted by the method of fundamental solutions; convex and non-convex
+//! elements with planar faces.
+//!
+//! Integration: the element is split into the sub-tetrahedra from a point
+//! that sees its whole boundary (a star point; found for convex and
+//! star-shaped non-convex elements), each integrated by a collapsed Gauss
+//! rule of `quadrature_order^3` points. The gradients are then shifted per
+//! element so that `Σ_q w_q ∇N_a = ∮ b_a n`, with the face moments shared by
+//! both sides of every face: the discrete divergence theorem holds exactly
+//! and the patch test passes whatever the MFS error. Masses are lumped by
+//! row scaling of the consistent mass (HRZ), which keeps them positive.
+
+mod element;
+mod face;
+mod mfs;
+
+use cleave_kernels::harmonic;
+use cleave_kernels::quadrature::{cone_rule, shift_gradients, volume_centroid};
+use cleave_kernels::tet::signed_volume;
+use cleave_kernels::{elasticity, vec3};
+use rayon::prelude::*;
+
+pub use element::{element_basis, ElementBasis};
+pub use face::{FaceBasis, FaceFunction};
+
+use super::{fill_batch, BasisError, Batch, ElementKind, Slots};
+use crate::material::Material;
+use crate::mesh::PolyMesh;
+
+/// Parameters of the MFS fit and of the quadrature of harmonic elements.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HarmonicOptions {
+    /// Offset `ξ` of the kernel centres outside the boundary, relative to
+    /// the element (or face) diameter (martin2008 eq. 12; 0.1).
+    pub offset: f64,
+    /// Kernel samples inside every edge (3; the collocation points are
+    /// three times as dense).
+    pub edge_samples: usize,
+    /// Gauss points per direction on each sub-tetrahedron (2: exact for
+    /// degree 1; 3: degree 3).
+    pub quadrature_order: usize,
+    /// Whether hexahedra use the closed-form trilinear basis (true) or are
+    /// fitted like every other element (false: a reference for tests).
+    pub trilinear_hexahedra: bool,
+}
+
+impl Default for HarmonicOptions {
+    fn default() -> Self {
+        HarmonicOptions { offset: 0.1, edge_samples: 3, quadrature_order: 2, trilinear_hexahedra: true }
+    }
+}
+
+/// The face functions of every face of the `elements` (indexed by global
+/// face id; `None` for faces of no listed element).
+pub fn face_bases(
+    mesh: &PolyMesh,
+    elements: &[u32],
+    options: &HarmonicOptions,
+) -> Result<Vec<Option<FaceBasis>>, BasisError> {
+    let mut owner = vec![None; mesh.faces.len()];
+    for &e in elements {
+        for r in &mesh.elements[e as usize].faces {
+            owner[r.face as usize].get_or_insert(e as usize);
+        }
+    }
+    owner
+        .par_iter()
+        .enumerate()
+        .map(|(f, owner)| match owner {
+            None => Ok(None),
+            Some(e) => FaceBasis::build(&mesh.nodes, &mesh.faces[f], options)
+                .map(Some)
+                .ok_or(BasisError::HarmonicFit { element: *e }),
+        })
+        .collect()
+}
+
+/// A point from which every surface triangle spans a positive
+/// sub-tetrahedron (at least `1e-3` of the diameter from every triangle's
+/// plane), by subgradient ascent of the smallest such distance from the
+/// centroid; `None` if none is found (the element is not star-shaped).
+pub fn star_point(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64) -> Option<[f64; 3]> {
+    let planes: Vec<([f64; 3], [f64; 3])> = triangles
+        .iter()
+        .filter_map(|t| {
+            let p = t.map(|i| verts[i as usize]);
+            let n = vec3::cross(vec3::sub(p[1], p[0]), vec3::sub(p[2], p[0]));
+            let l = vec3::norm(n);
+            (l > 0.0).then(|| (p[0], vec3::scale(n, 1.0 / l)))
+        })
+        .collect();
+    let clearance = |x: [f64; 3]| {
+        planes.iter().map(|(p, n)| (vec3::dot(vec3::sub(*p, x), *n), *n)).fold((f64::INFINITY, [0.0; 3]), |a, b| {
+            if b.0 < a.0 {
+                b
+            } else {
+                a
+            }
+        })
+    };
+    let positive = |x: [f64; 3]| {
+        triangles.iter().all(|t| {
+            let p = t.map(|i| verts[i as usize]);
+            signed_volume(x, p[0], p[1], p[2]) >= 0.0
+        })
+    };
+    let (_, mut x) = volume_centroid(verts, triangles);
+    let mut step = 0.1 * diameter;
+    for _ in 0..400 {
+        let (d, n) = clearance(x);
+        if d > 1e-3 * diameter && positive(x) {
+            return Some(x);
+        }
+        x = vec3::sub(x, vec3::scale(n, step));
+        step *= 0.985;
+    }
+    None
+}
+
+/// Per-thread scratch of the batch build.
+struct Scratch {
+    phi: Vec<f64>,
+    grad: Vec<f64>,
+    gram: Vec<f64>,
+    moments: Vec<[f64; 3]>,
+    points: Vec<[f64; 3]>,
+    weights: Vec<f64>,
+}
+
+/// Builds the batch of `k`-node harmonic elements `elements`; `faces` holds
+/// the face functions of their faces.
+pub(super) fn build_batch(
+    mesh: &PolyMesh,
+    material: &Material,
+    faces: &[Option<FaceBasis>],
+    options: &HarmonicOptions,
+    k: usize,
+    elements: Vec<u32>,
+) -> Result<Batch, BasisError> {
+    let (lambda, mu) = material.lame();
+    let nq = (2 * k - 4) * options.quadrature_order.pow(3);
+    let scratch = || Scratch {
+        phi: vec![0.0; k * nq],
+        grad: vec![0.0; 3 * k * nq],
+        gram: vec![0.0; 9 * k * k],
+        moments: vec![[0.0; 3]; k],
+        points: Vec::with_capacity(nq),
+        weights: Vec::with_capacity(nq),
+    };
+    fill_batch(mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
+        let Slots { element, verts, triangles, volume, mass_fraction, stiffness, stress_grads, points, weights } = slot;
+        let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
+        let apex = star_point(verts, triangles, mesh.element_diameter(element))
+            .ok_or(BasisError::NotStarShaped { element })?;
+        s.points.clear();
+        s.weights.clear();
+        cone_rule(verts, triangles, apex, options.quadrature_order, &mut s.points, &mut s.weights);
+        points.copy_from_slice(&s.points);
+        weights.copy_from_slice(&s.weights);
+        let v: f64 = weights.iter().sum();
+        if !(v > 0.0) {
+            return Err(degenerate());
+        }
+        *volume = v;
+        let basis = element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?;
+        harmonic::evaluate(&basis.functions(), points, &mut s.phi, &mut s.grad);
+        boundary_moments(mesh, element, faces, &mut s.moments);
+        shift_gradients(weights, &mut s.grad, &s.moments);
+        elasticity::element_stiffness(&s.grad, weights, k, lambda, mu, &mut s.gram, stiffness);
+        // HRZ lumping: diagonal of the consistent mass, rescaled to sum 1
+        for (a, m) in mass_fraction.iter_mut().enumerate() {
+            *m = s.phi[a * nq..(a + 1) * nq].iter().zip(weights.iter()).map(|(p, w)| p * p * w).sum();
+        }
+        let total: f64 = mass_fraction.iter().sum();
+        mass_fraction.iter_mut().for_each(|m| *m /= total);
+        for (g, m) in stress_grads.iter_mut().zip(s.moments.iter()) {
+            *g = vec3::scale(*m, 1.0 / v);
+        }
+        if stiffness.iter().chain(mass_fraction.iter()).any(|x| !x.is_finite()) {
+            return Err(BasisError::HarmonicFit { element });
+        }
+        Ok(())
+    })
+}
+
+/// `∮ b_a n` (m^2) for every node `a` of element `e` (element-local order)
+/// from the shared face moments, with the element's outward orientation.
+pub fn boundary_moments(mesh: &PolyMesh, e: usize, faces: &[Option<FaceBasis>], out: &mut [[f64; 3]]) {
+    let el = &mesh.elements[e];
+    out.fill([0.0; 3]);
+    for r in &el.faces {
+        let face = &mesh.faces[r.face as usize];
+        let basis = faces[r.face as usize].as_ref().expect("face functions of a harmonic element");
+        let sign = if r.outward { 1.0 } else { -1.0 };
+        for (&v, m) in face.vertices.iter().zip(&basis.moments) {
+            let a = el.nodes.binary_search(&v).expect("face vertex is an element node");
+            out[a] = vec3::add(out[a], vec3::scale(*m, sign));
+        }
+    }
+}
