@@ -133,6 +133,71 @@ fn basis_eval_ms(mesh: &PolyMesh, reps: usize, simd: bool) -> (f64, usize) {
     (ms, reps * nq)
 }
 
+/// Harmonic elements per vertex count: basis construction + `K_e` per
+/// element on one thread and on all, and the evaluation kernel per point
+/// against the mean value kernel at the same points.
+fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
+    use crate::store::{harmonic, Family, HarmonicOptions};
+    let copies = if quick { 20 } else { 200 };
+    let options = BasisOptions {
+        family: Family::Harmonic,
+        harmonic: HarmonicOptions { trilinear_hexahedra: false, ..Default::default() },
+        ..Default::default()
+    };
+    let single = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| Error::Parameter(format!("thread pool: {e}")))?;
+    let mut out = Vec::new();
+    for k in [8, 12, 24, 40] {
+        let Some(one) = element_with_vertices(k) else { continue };
+        let batch = replicate(&one, copies)?;
+        let (all_ms, store) = best_ms(3, || ElementStore::build(&batch, material, &options));
+        store?;
+        let (one_ms, store) = best_ms(3, || single.install(|| ElementStore::build(&batch, material, &options)));
+        store?;
+        // evaluation at the mean value rule's points, against that kernel
+        let faces = harmonic::face_bases(&one, &[0], &options.harmonic)?;
+        let basis = harmonic::element_basis(&one, 0, &faces, &options.harmonic)
+            .ok_or(crate::store::BasisError::HarmonicFit { element: 0 })?;
+        let reps = if quick { 100 } else { 2000 };
+        let (mv_ms, points) = basis_eval_ms(&one, reps, true);
+        let nodes = &one.elements[0].nodes;
+        let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| one.nodes[v as usize]).collect();
+        let tris: Vec<[u32; 3]> =
+            one.element_triangles(0).map(|t| t.map(|g| nodes.binary_search(&g).unwrap_or(0) as u32)).collect();
+        let nq = cleave_kernels::quadrature::paper_rule_len(k, tris.len());
+        let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; k]);
+        cleave_kernels::quadrature::paper_rule(&verts, &tris, &mut p, &mut w, &mut mu);
+        let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
+        let (hm_ms, ()) = best_ms(3, || {
+            for _ in 0..reps {
+                cleave_kernels::harmonic::evaluate(&basis.functions(), &p, &mut phi, &mut grad);
+            }
+        });
+        let label = format!("{copies} x {k}-vertex");
+        let m = |name: String, ms: f64, extra| Measurement {
+            name,
+            mesh: label.clone(),
+            elements: copies,
+            nodes: copies * k,
+            ms,
+            elements_per_s: copies as f64 / (ms * 1e-3),
+            extra,
+        };
+        let kernels = ("kernels".to_string(), basis.centres.len() as f64);
+        out.push(m(format!("harmonic basis+K_e k={k} (1 thread)"), one_ms, Some(kernels.clone())));
+        out.push(m(format!("harmonic basis+K_e k={k}"), all_ms, Some(kernels)));
+        let per_point = |ms: f64| points as f64 / (ms * 1e-3);
+        out.push(m(
+            format!("harmonic eval k={k} (1 thread)"),
+            hm_ms,
+            Some(("points/s vs mean value".into(), per_point(hm_ms) / per_point(mv_ms))),
+        ));
+    }
+    Ok(out)
+}
+
 /// Runs the suite (`quick`: small meshes, for smoke tests).
 pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let cells = if quick { [16, 4, 4] } else { [64, 16, 16] };
@@ -204,6 +269,7 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
         out.push(m(format!("MV basis k={k} scalar"), scalar_ms, Some(("simd speed-up".into(), scalar_ms / simd_ms))));
         out.push(m(format!("MV K_e build k={k}"), ms, None));
     }
+    out.extend(harmonic_measurements(quick, &material)?);
     // global assembly on a mixed mesh of about 100k elements
     let cells = if quick { [12, 6, 6] } else { [40, 20, 20] };
     let mut mixed = box_tet([0.0; 3], [2.0, 1.0, 1.0], cells)?;

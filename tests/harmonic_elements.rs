@@ -8,6 +8,7 @@ mod common;
 use cleave::material::Material;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_l_prisms;
+use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementKind, ElementStore, Family, HarmonicOptions};
 use cleave::topology::{split_elements_by_plane, Plane, SplitOptions};
 
@@ -141,4 +142,49 @@ fn cantilever_on_nonconvex_cells_converges() {
     // polyhedra to 39.36 m
     assert!(w.windows(2).all(|p| p[1] > p[0]), "monotone from below");
     assert!((limit - 39.45).abs() < 0.02 * 39.45, "limit {limit}");
+}
+
+/// A single non-convex element (martin2008 Fig. 1): rotated rigidly by 90°
+/// it carries no elastic force with warping, and in free fall its centre of
+/// mass follows gravity exactly while it stays finite.
+#[test]
+fn nonconvex_element_has_no_ghost_forces_and_falls_freely() {
+    let outline: Vec<[f64; 2]> = (0..10)
+        .map(|i| {
+            let a = std::f64::consts::PI * i as f64 / 5.0;
+            let r = if i % 2 == 0 { 1.0 } else { 0.45 };
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect();
+    let mesh = cleave::meshing::prism(&outline, 0.4).unwrap();
+    assert!(!mesh.is_convex(0, 1e-9));
+    let params = SimulationParams { material: material(), basis: harmonic(true), ..Default::default() };
+    let mut sim = Simulation::new(mesh, params).unwrap();
+    let u: Vec<[f64; 3]> = sim.mesh().nodes.iter().map(|x| [-x[1] - x[0], x[0] - x[1], 0.0]).collect();
+    sim.set_displacements(&u).unwrap();
+    let weight: f64 = sim.masses().iter().sum::<f64>() * 9.81;
+    let ghost = sim.elastic_forces().iter().flatten().map(|f| f.abs()).fold(0.0, f64::max) / weight;
+    println!("star prism rotated by 90 degrees: largest elastic force {ghost:.1e} of its weight");
+    assert!(ghost < 1e-9, "{ghost}");
+    sim.set_displacements(&vec![[0.0; 3]; u.len()]).unwrap();
+    let steps = 100;
+    for _ in 0..steps {
+        sim.step().unwrap();
+    }
+    let p = sim.linear_momentum();
+    let mass: f64 = sim.masses().iter().sum();
+    let t = steps as f64 * sim.params().dt;
+    assert!((p[2] / mass + 9.81 * t).abs() < 1e-9 * 9.81 * t, "vertical velocity {}", p[2] / mass);
+    assert!(sim.positions().iter().flatten().all(|x| x.is_finite()));
+}
+
+/// A U-shaped prism with tall arms is not star-shaped: its quadrature
+/// cannot be a cone from one point, and the build says so by element id.
+#[test]
+fn non_star_shaped_element_is_refused_by_id() {
+    let u = [[0.0, 0.0], [3.0, 0.0], [3.0, 5.0], [2.0, 5.0], [2.0, 1.0], [1.0, 1.0], [1.0, 5.0], [0.0, 5.0]];
+    let mesh = cleave::meshing::prism(&u, 1.0).unwrap();
+    let err = ElementStore::build(&mesh, &material(), &harmonic(true)).unwrap_err();
+    assert_eq!(err, cleave::store::BasisError::NotStarShaped { element: 0 });
+    assert!(err.to_string().contains("element 0 is not star-shaped"), "{err}");
 }

@@ -95,6 +95,9 @@ fn bad_input_ends_in_one_clear_error() {
     // NaN parameters are refused with their key
     let err = run_fails(d, &format!("{}[simulation]\nmode = \"dynamic\"\ndt = nan\n", scene_with_mesh("good.mesh")));
     assert!(err.contains("simulation.dt"), "{err}");
+    // harmonic fit parameters out of range, with the key
+    let err = run_fails(d, &format!("{}[basis]\nfamily = \"harmonic\"\noffset = nan\n", scene_with_mesh("good.mesh")));
+    assert!(err.contains("basis.offset") && err.contains("(0, 1]"), "{err}");
     // an unconstrained body is singular
     let err = run_fails(
         d,

@@ -195,15 +195,6 @@ pub fn element_basis(
     }
     let fitted = fit::<3>(centres, &colloc, &targets, &scaled)?;
     let n = fitted.centres.len();
-    let (mut max_err, mut sum_sq) = (0.0f64, 0.0);
-    let mut vals = vec![0.0; k];
-    for (p, t) in colloc.iter().zip(targets.chunks(k)) {
-        fitted.values(*p, &mut vals);
-        for (v, t) in vals.iter().zip(t) {
-            max_err = max_err.max((v - t).abs());
-            sum_sq += (v - t) * (v - t);
-        }
-    }
     // back to world units: 1/|x̂ - k̂| = s/|x - k|, c·x̂ = (c/s)·(x - o)
     let c = &fitted.coefficients;
     Some(ElementBasis {
@@ -213,7 +204,7 @@ pub fn element_basis(
             .map(|a| [c[n * k + a] / size, c[(n + 1) * k + a] / size, c[(n + 2) * k + a] / size, c[(n + 3) * k + a]])
             .collect(),
         origin,
-        boundary_error: max_err,
-        boundary_rms: (sum_sq / targets.len() as f64).sqrt(),
+        boundary_error: fitted.max_error,
+        boundary_rms: fitted.rms_error,
     })
 }

@@ -40,8 +40,6 @@ pub struct PlanarMfs {
     axes: [[f64; 3]; 2],
     scale: f64,
     fit: Fit<2>,
-    /// Largest deviation from the edge hat functions at the check points.
-    pub boundary_error: f64,
 }
 
 impl PlanarMfs {
@@ -294,8 +292,7 @@ fn planar_mfs(
         origin: centroid,
         axes: [u, v],
         scale: diameter,
-        fit: Fit { centres: Vec::new(), coefficients: Vec::new(), k: kf },
-        boundary_error: 0.0,
+        fit: Fit { centres: Vec::new(), coefficients: Vec::new(), k: kf, max_error: 0.0, rms_error: 0.0 },
     };
     let poly = Polygon { pts: loop_pts.iter().map(|&p| mfs.local(p)).collect() };
     if !(diameter > 0.0) || poly.pts.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
@@ -347,11 +344,5 @@ fn planar_mfs(
         }
     }
     mfs.fit = fit(centres, &colloc, &targets, &poly.pts)?;
-    let mut vals = vec![0.0; kf];
-    for (p, t) in colloc.iter().zip(targets.chunks(kf)) {
-        mfs.fit.values(*p, &mut vals);
-        let err = vals.iter().zip(t).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        mfs.boundary_error = mfs.boundary_error.max(err);
-    }
     Some(mfs)
 }

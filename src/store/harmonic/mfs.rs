@@ -45,6 +45,10 @@ pub(super) struct Fit<const D: usize> {
     pub coefficients: Vec<f64>,
     /// Number of functions.
     pub k: usize,
+    /// Largest deviation `|N_a(c_i) - b_a(c_i)|` at the collocation points.
+    pub max_error: f64,
+    /// Root mean square of the same deviations.
+    pub rms_error: f64,
 }
 
 impl<const D: usize> Fit<D> {
@@ -102,6 +106,7 @@ pub(super) fn fit<const D: usize>(
         }
         a[(i, n + D)] = w;
     }
+    let system = a.clone();
     let mut rhs = Mat::<f64>::from_fn(m, k, |i, a| row_weight(i) * targets[i * k + a]);
     let block = factor::recommended_block_size::<f64>(m, cols);
     let mut mem = MemBuffer::new(StackReq::any_of(&[
@@ -127,7 +132,23 @@ pub(super) fn fit<const D: usize>(
     );
     let mut coefficients: Vec<f64> = (0..cols).flat_map(|r| (0..k).map(move |c| (r, c))).map(|rc| rhs[rc]).collect();
     reproduce_linear::<D>(&mut coefficients, n, nodes)?;
-    coefficients.iter().all(|c| c.is_finite()).then_some(Fit { centres, coefficients, k })
+    if !coefficients.iter().all(|c| c.is_finite()) {
+        return None;
+    }
+    // the fit's deviations from the targets, by one matrix product
+    let c = Mat::<f64>::from_fn(cols, k, |r, a| coefficients[r * k + a]);
+    let mut values = Mat::<f64>::zeros(m, k);
+    faer::linalg::matmul::matmul(values.as_mut(), faer::Accum::Replace, system.as_ref(), c.as_ref(), 1.0, Par::Seq);
+    let (mut max_error, mut sum_sq) = (0.0f64, 0.0);
+    for i in 0..m {
+        for a in 0..k {
+            let d = values[(i, a)] / row_weight(i) - targets[i * k + a];
+            max_error = max_error.max(d.abs());
+            sum_sq += d * d;
+        }
+    }
+    let rms_error = (sum_sq / (m * k) as f64).sqrt();
+    Some(Fit { centres, coefficients, k, max_error, rms_error })
 }
 
 /// Projects the coefficients (row-major `(n + D + 1) x k`) onto the affine
