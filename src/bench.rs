@@ -108,10 +108,20 @@ pub fn replicate(mesh: &PolyMesh, n: usize) -> Result<PolyMesh, Error> {
     Ok(PolyMesh::from_cells(nodes, &cells)?)
 }
 
-/// Wall time (ms) of evaluating the mean value basis at the paper's points of
-/// `mesh`'s single element `reps` times, SIMD (`true`) or scalar reference.
-fn basis_eval_ms(mesh: &PolyMesh, reps: usize, simd: bool) -> (f64, usize) {
-    use cleave_kernels::{mean_value, quadrature};
+/// A basis evaluation kernel to time.
+enum EvalKernel<'a> {
+    /// Mean value coordinates, SIMD.
+    MeanValue,
+    /// Mean value coordinates, the scalar reference.
+    MeanValueScalar,
+    /// Fitted harmonic functions, SIMD.
+    Harmonic(&'a crate::store::harmonic::ElementBasis),
+}
+
+/// Wall time (ms) of evaluating `kernel` at the paper's points of `mesh`'s
+/// single element `reps` times, and the number of points evaluated.
+fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) -> (f64, usize) {
+    use cleave_kernels::{harmonic, mean_value, quadrature};
     let nodes = &mesh.elements[0].nodes;
     let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
     let tris: Vec<[u32; 3]> =
@@ -123,14 +133,27 @@ fn basis_eval_ms(mesh: &PolyMesh, reps: usize, simd: bool) -> (f64, usize) {
     let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
     let (ms, ()) = best_ms(3, || {
         for _ in 0..reps {
-            if simd {
-                mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad);
-            } else {
-                mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad);
+            match kernel {
+                EvalKernel::MeanValue => mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad),
+                EvalKernel::MeanValueScalar => mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad),
+                EvalKernel::Harmonic(b) => harmonic::evaluate(&b.functions(), &p, &mut phi, &mut grad),
             }
         }
     });
     (ms, reps * nq)
+}
+
+/// A measurement on `copies` disjoint `k`-vertex elements.
+fn per_element(copies: usize, k: usize, name: String, ms: f64, extra: Option<(String, f64)>) -> Measurement {
+    Measurement {
+        name,
+        mesh: format!("{copies} x {k}-vertex"),
+        elements: copies,
+        nodes: copies * k,
+        ms,
+        elements_per_s: copies as f64 / (ms * 1e-3),
+        extra,
+    }
 }
 
 /// Harmonic elements per vertex count: basis construction + `K_e` per
@@ -161,30 +184,9 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
         let basis = harmonic::element_basis(&one, 0, &faces, &options.harmonic)
             .ok_or(crate::store::BasisError::HarmonicFit { element: 0 })?;
         let reps = if quick { 100 } else { 2000 };
-        let (mv_ms, points) = basis_eval_ms(&one, reps, true);
-        let nodes = &one.elements[0].nodes;
-        let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| one.nodes[v as usize]).collect();
-        let tris: Vec<[u32; 3]> =
-            one.element_triangles(0).map(|t| t.map(|g| nodes.binary_search(&g).unwrap_or(0) as u32)).collect();
-        let nq = cleave_kernels::quadrature::paper_rule_len(k, tris.len());
-        let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; k]);
-        cleave_kernels::quadrature::paper_rule(&verts, &tris, &mut p, &mut w, &mut mu);
-        let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
-        let (hm_ms, ()) = best_ms(3, || {
-            for _ in 0..reps {
-                cleave_kernels::harmonic::evaluate(&basis.functions(), &p, &mut phi, &mut grad);
-            }
-        });
-        let label = format!("{copies} x {k}-vertex");
-        let m = |name: String, ms: f64, extra| Measurement {
-            name,
-            mesh: label.clone(),
-            elements: copies,
-            nodes: copies * k,
-            ms,
-            elements_per_s: copies as f64 / (ms * 1e-3),
-            extra,
-        };
+        let (mv_ms, points) = basis_eval_ms(&one, reps, EvalKernel::MeanValue);
+        let (hm_ms, _) = basis_eval_ms(&one, reps, EvalKernel::Harmonic(&basis));
+        let m = |name, ms, extra| per_element(copies, k, name, ms, extra);
         let kernels = ("kernels".to_string(), basis.centres.len() as f64);
         out.push(m(format!("harmonic basis+K_e k={k} (1 thread)"), one_ms, Some(kernels.clone())));
         out.push(m(format!("harmonic basis+K_e k={k}"), all_ms, Some(kernels)));
@@ -246,21 +248,12 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     let copies = if quick { 1000 } else { 10_000 };
     for k in [8, 12, 16, 24] {
         let Some(one) = element_with_vertices(k) else { continue };
-        let (simd_ms, points) = basis_eval_ms(&one, copies, true);
-        let (scalar_ms, _) = basis_eval_ms(&one, copies, false);
+        let (simd_ms, points) = basis_eval_ms(&one, copies, EvalKernel::MeanValue);
+        let (scalar_ms, _) = basis_eval_ms(&one, copies, EvalKernel::MeanValueScalar);
         let batch = replicate(&one, copies)?;
         let (ms, store) = best_ms(3, || ElementStore::build(&batch, &material, &BasisOptions::default()));
         store?;
-        let label = format!("{copies} x {k}-vertex");
-        let m = |name: String, ms: f64, extra| Measurement {
-            name,
-            mesh: label.clone(),
-            elements: copies,
-            nodes: copies * k,
-            ms,
-            elements_per_s: copies as f64 / (ms * 1e-3),
-            extra,
-        };
+        let m = |name, ms, extra| per_element(copies, k, name, ms, extra);
         out.push(m(
             format!("MV basis k={k} (1 thread)"),
             simd_ms,

@@ -120,22 +120,8 @@ impl pulp::WithSimd for Evaluate<'_> {
         let (k, nq) = (f.len(), points.len());
         let width = Lanes::<S>::WIDTH;
         let mut acc = vec![Lanes::splat(simd, 0.0); 4 * k];
-        let mut coords = [[0.0f64; 16]; 3];
         for q0 in (0..nq).step_by(width) {
-            let n = width.min(nq - q0);
-            for (i, lanes) in coords.iter_mut().enumerate() {
-                for (l, p) in points[q0..q0 + n].iter().enumerate() {
-                    lanes[l] = p[i];
-                }
-                // pad the last group with a copy of its first point
-                let first = lanes[0];
-                lanes[n..width].fill(first);
-            }
-            let x = [
-                Lanes::load(simd, &coords[0][..width]),
-                Lanes::load(simd, &coords[1][..width]),
-                Lanes::load(simd, &coords[2][..width]),
-            ];
+            let (x, n) = Lanes::load_points(simd, points, q0);
             accumulate(f, x, &mut acc);
             for a in 0..k {
                 acc[4 * a].store(&mut phi[a * nq + q0..a * nq + q0 + n]);

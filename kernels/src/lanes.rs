@@ -137,6 +137,25 @@ impl<S: Simd> Lanes<S> {
         }
     }
 
+    /// The coordinates of the points `points[q0..]` (at most `WIDTH`) as
+    /// lanes, the last group padded with copies of its first point (so
+    /// padding lanes stay where the caller's points are); returns the lanes
+    /// and the number of real points.
+    #[inline(always)]
+    pub fn load_points(simd: S, points: &[[f64; 3]], q0: usize) -> ([Self; 3], usize) {
+        let width = Self::WIDTH;
+        let n = width.min(points.len() - q0);
+        let mut coords = [[0.0f64; 16]; 3];
+        for (i, lanes) in coords.iter_mut().enumerate() {
+            for (l, p) in points[q0..q0 + n].iter().enumerate() {
+                lanes[l] = p[i];
+            }
+            let first = lanes[0];
+            lanes[n..width].fill(first);
+        }
+        (std::array::from_fn(|i| Self::load(simd, &coords[i][..width])), n)
+    }
+
     /// The same value in every lane.
     #[inline(always)]
     pub fn splat(simd: S, v: f64) -> Self {

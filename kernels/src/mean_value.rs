@@ -166,22 +166,9 @@ impl pulp::WithSimd for Evaluate<'_> {
         let mut u = vec![[z; 3]; k];
         let mut d = vec![z; k];
         let mut w = vec![z; k];
-        let mut coords = [[0.0f64; 16]; 3];
         for q0 in (0..nq).step_by(width) {
-            let n = width.min(nq - q0);
-            for (i, lanes) in coords.iter_mut().enumerate() {
-                for (l, p) in points[q0..q0 + n].iter().enumerate() {
-                    lanes[l] = p[i];
-                }
-                // pad the last group with a copy of its first point (inside)
-                let first = lanes[0];
-                lanes[n..width].fill(first);
-            }
-            let x = [
-                Dual::variable(Lanes::load(simd, &coords[0][..width]), 0),
-                Dual::variable(Lanes::load(simd, &coords[1][..width]), 1),
-                Dual::variable(Lanes::load(simd, &coords[2][..width]), 2),
-            ];
+            let (x, n) = Lanes::load_points(simd, points, q0);
+            let x: [Dual<Lanes<S>>; 3] = std::array::from_fn(|i| Dual::variable(x[i], i));
             shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
             for (a, wa) in w.iter().enumerate() {
                 wa.v.store(&mut phi[a * nq + q0..a * nq + q0 + n]);
