@@ -126,6 +126,28 @@ pub(crate) fn face_key(vertices: &[u32]) -> Vec<u32> {
     k
 }
 
+/// Largest distance between two of `points` (m).
+pub(crate) fn diameter(points: &[[f64; 3]]) -> f64 {
+    let mut d2: f64 = 0.0;
+    for (i, &a) in points.iter().enumerate() {
+        for &b in &points[i + 1..] {
+            let d = sub(a, b);
+            d2 = d2.max(cleave_kernels::vec3::dot(d, d));
+        }
+    }
+    d2.sqrt()
+}
+
+/// Shape quality `ρ = 6√2 V / d³` of a cell of volume `V` and diameter
+/// `d`: scale invariant, 1 for the regular tetrahedron (about 0.27 for the
+/// tetrahedra of a Kuhn-split cube, 1.63 for a cube), and tending to 0 as
+/// the cell flattens (a sliver) or collapses onto a line (a needle). A cell
+/// of quality `ρ` has a width of at most about `ρ d` in some direction, so
+/// its shape function gradients grow like `1 / ρ`.
+pub fn quality(volume: f64, diameter: f64) -> f64 {
+    6.0 * std::f64::consts::SQRT_2 * volume / diameter.powi(3)
+}
+
 impl PolyMesh {
     /// Builds a mesh from volume cells, sharing faces with equal vertex sets
     /// and orienting every face reference outward.
@@ -282,15 +304,14 @@ impl PolyMesh {
 
     /// Largest distance between two nodes of element `e` (m).
     pub fn element_diameter(&self, e: usize) -> f64 {
-        let nodes = &self.elements[e].nodes;
-        let mut d2: f64 = 0.0;
-        for (i, &a) in nodes.iter().enumerate() {
-            for &b in &nodes[i + 1..] {
-                let d = sub(self.nodes[a as usize], self.nodes[b as usize]);
-                d2 = d2.max(cleave_kernels::vec3::dot(d, d));
-            }
-        }
-        d2.sqrt()
+        let points: Vec<[f64; 3]> = self.elements[e].nodes.iter().map(|&v| self.nodes[v as usize]).collect();
+        diameter(&points)
+    }
+
+    /// Shape quality of element `e`: [`quality`] of its volume and
+    /// diameter (1 for a regular tetrahedron, 0 for a flat element).
+    pub fn element_quality(&self, e: usize) -> f64 {
+        quality(self.element_volume(e), self.element_diameter(e))
     }
 
     /// Axis-aligned bounding box `(min, max)` of the nodes (m).

@@ -57,8 +57,9 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
 }
 
 /// Opens the material between the two sides of a cut: every node that
-/// `may_split(node)` allows and that elements on both sides use is
-/// duplicated, the negative side taking the copy; a face shared by the two
+/// `may_split(node)` allows, that elements on both sides use and that lies
+/// on no face the two sides share unless `separable(face)`, is duplicated,
+/// the negative side taking the copy; a face shared by the two
 /// sides is separated (the negative side gets its own copy) when
 /// `separable(face)`, and every other face of the negative side has its
 /// nodes renamed. Returns the `(original, copy)` pairs and the elements
@@ -69,11 +70,19 @@ pub(crate) fn separate(
     may_split: impl Fn(u32) -> bool,
     separable: impl Fn(u32) -> bool,
 ) -> (Vec<(u32, u32)>, Vec<u32>) {
+    // which sides use each node and each face
+    let bit = |e: usize| if side[e] > 0 { 1u8 } else { 2 };
     let mut used = vec![0u8; mesh.nodes.len()];
+    let mut face_sides = vec![0u8; mesh.faces.len()];
     for (e, el) in mesh.elements.iter().enumerate() {
-        let bit = if side[e] > 0 { 1 } else { 2 };
-        for &v in &el.nodes {
-            used[v as usize] |= bit;
+        el.nodes.iter().for_each(|&v| used[v as usize] |= bit(e));
+        el.faces.iter().for_each(|r| face_sides[r.face as usize] |= bit(e));
+    }
+    // a node on a face the two sides share but keep joined stays single
+    // (opening it would tear that face)
+    for (f, face) in mesh.faces.iter().enumerate() {
+        if face_sides[f] == 3 && !separable(f as u32) {
+            face.vertices.iter().for_each(|&v| used[v as usize] = 0);
         }
     }
     let mut copy = vec![u32::MAX; mesh.nodes.len()];
@@ -88,13 +97,6 @@ pub(crate) fn separate(
     let mut touched = Vec::new();
     if duplicated.is_empty() {
         return (duplicated, touched);
-    }
-    // faces: which sides use each one
-    let mut face_sides = vec![0u8; mesh.faces.len()];
-    for (e, el) in mesh.elements.iter().enumerate() {
-        for r in &el.faces {
-            face_sides[r.face as usize] |= if side[e] > 0 { 1 } else { 2 };
-        }
     }
     let remap = |v: &u32| if copy[*v as usize] != u32::MAX { copy[*v as usize] } else { *v };
     let mut done = vec![u32::MAX; mesh.faces.len()];

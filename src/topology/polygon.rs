@@ -150,12 +150,25 @@ pub fn cut_by_polygon(
     let split = split_elements_by_plane(mesh, &plane, &chosen, opts)?;
     let mut new_nodes = split.new_nodes.clone();
 
-    // 2. the faces in the plane and who uses them
+    // 2. the faces in the plane and who uses them; an element kept whole
+    // (a part would have been a sliver) is cut around: its faces towards
+    // the other side take the place of the cap it did not get
     let mut in_plane: Vec<u32> = split.caps.clone();
     let mut users: HashMap<u32, Vec<u32>> = HashMap::new();
     for (e, el) in mesh.elements.iter().enumerate() {
         for r in &el.faces {
             users.entry(r.face).or_default().push(e as u32);
+        }
+    }
+    let side = element_sides(mesh, &plane);
+    let mut detour: Vec<u32> = Vec::new();
+    for &e in &split.kept_whole {
+        for r in &mesh.elements[e as usize].faces {
+            let across = users[&r.face].iter().any(|&o| side[o as usize] != side[e as usize]);
+            if across && !in_plane.contains(&r.face) {
+                in_plane.push(r.face);
+                detour.push(r.face);
+            }
         }
     }
     for (f, face) in mesh.faces.iter().enumerate() {
@@ -279,7 +292,8 @@ pub fn cut_by_polygon(
     let has_inner = inside_faces.iter().any(|&f| mesh.faces[f as usize].vertices.iter().any(|&v| node_inside(mesh, v)));
     if !has_inner {
         let c2 = frame.project(centroid);
-        let host = inside_faces.iter().copied().find(|&f| {
+        // the pocket node lies in the plane: only a face in it can host it
+        let host = inside_faces.iter().copied().filter(|f| !detour.contains(f)).find(|&f| {
             let mut pts: Vec<[f64; 2]> =
                 mesh.faces[f as usize].vertices.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
             ccw(&mut pts);
@@ -327,22 +341,13 @@ pub fn cut_by_polygon(
     for &e in &touched {
         mesh.refresh_element_nodes(e as usize);
     }
-    let side = element_sides(mesh, &plane);
     inside_faces.sort_unstable();
-    // a node opens when it lies strictly inside and every face of the plane
-    // around it is inside (a face left straddling the outline, where the
-    // line grazed it within the snapping distance, keeps its nodes shared)
+    // a node opens when it lies strictly inside (and, by `separate`, on no
+    // face of the plane left joined outside the polygon)
     let mut inner = vec![false; mesh.nodes.len()];
     for &f in &inside_faces {
         for &v in &mesh.faces[f as usize].vertices {
             inner[v as usize] = node_inside(mesh, v);
-        }
-    }
-    for &f in &in_plane {
-        if inside_faces.binary_search(&f).is_err() {
-            for &v in &mesh.faces[f as usize].vertices {
-                inner[v as usize] = false;
-            }
         }
     }
     let (duplicated, renamed) = separate(

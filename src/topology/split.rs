@@ -9,13 +9,22 @@
 //! that fraction ever appears. The mesh stays conforming by construction and
 //! the total volume is unchanged (the cap is shared with opposite
 //! orientations).
+//!
+//! Slivers (wicke2007 §4) are not made in the first place: an element whose
+//! part on either side would have a [`quality`] below
+//! [`SplitOptions::min_quality`] is kept whole (its neighbours' new nodes
+//! still join its faces). A cut then follows that element's faces on its
+//! thin side, so the cut surface strays from the plane by at most the
+//! thickness of the sliver it avoided. Unlike merging slivers after the fact
+//! by projecting them onto a plane, this moves no node, so the total volume
+//! stays exact and every element stays convex (the next split needs that).
 
 use std::collections::HashMap;
 
 use cleave_kernels::vec3::{cross, dot, lerp, norm, scale, sub};
 use thiserror::Error;
 
-use crate::mesh::{Face, FaceRef, PolyMesh};
+use crate::mesh::{diameter, quality, Face, FaceRef, PolyMesh};
 
 /// An oriented plane through `point` with normal `normal` (need not be unit).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,11 +41,15 @@ pub struct SplitOptions {
     /// Relative snapping distance (fraction of a node's shortest incident
     /// edge). Default `1e-4`.
     pub snap: f64,
+    /// Smallest [`quality`] a part of a split element may have; an element
+    /// that would leave a flatter part is kept whole. Default `0.02`: a part
+    /// that thin spans about 0.5 % of its element's diameter.
+    pub min_quality: f64,
 }
 
 impl Default for SplitOptions {
     fn default() -> Self {
-        SplitOptions { snap: 1e-4 }
+        SplitOptions { snap: 1e-4, min_quality: 0.02 }
     }
 }
 
@@ -61,9 +74,12 @@ pub struct SplitReport {
     /// For each split element: `(kept id, new id)`; the kept id holds the
     /// positive part, the new id (appended) the negative part.
     pub split_elements: Vec<(u32, u32)>,
-    /// Elements that were not split but gained nodes or face halves (local
-    /// splits only), in increasing order.
+    /// Elements that were not split but gained nodes or face halves, in
+    /// increasing order.
     pub repaired_elements: Vec<u32>,
+    /// Elements the plane crosses that were kept whole because one of their
+    /// parts would have been a sliver, in increasing order.
+    pub kept_whole: Vec<u32>,
     /// The cap face of each split element (same order as `split_elements`).
     pub caps: Vec<u32>,
 }
@@ -143,14 +159,18 @@ fn split(
             *c = true;
         }
     }
-    let crossed: Vec<usize> = (0..mesh.elements.len())
+    let mut report = SplitReport::default();
+    let (crossed, kept_whole): (Vec<usize>, Vec<usize>) = (0..mesh.elements.len())
         .filter(|&e| chosen[e])
         .filter(|&e| {
             let nodes = &mesh.elements[e].nodes;
             nodes.iter().any(|&v| side[v as usize] > 0) && nodes.iter().any(|&v| side[v as usize] < 0)
         })
-        .collect();
-    let mut report = SplitReport::default();
+        .partition(|&e| {
+            let [pos, neg] = part_qualities(mesh, e, &dist, &side, plane.point);
+            pos.min(neg) >= opts.min_quality
+        });
+    report.kept_whole = kept_whole.iter().map(|&e| e as u32).collect();
     if crossed.is_empty() {
         return Ok(report);
     }
@@ -307,6 +327,40 @@ fn split(
         report.caps.push(cap);
     }
     Ok(report)
+}
+
+/// The [`quality`] of the positive and the negative part that splitting
+/// element `e` would make, from the same vertices and edge crossings the
+/// split uses. Each part's volume is the sum over its clipped faces of the
+/// cones from a point on the cap (the cap itself adds nothing).
+fn part_qualities(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], on_plane: [f64; 3]) -> [f64; 2] {
+    let el = &mesh.elements[e];
+    let mut volume = [0.0; 2];
+    let mut points: [Vec<[f64; 3]>; 2] = [Vec::new(), Vec::new()];
+    let mut lp = Vec::new();
+    for (p, sign) in [1i8, -1].into_iter().enumerate() {
+        for r in &el.faces {
+            let v = &mesh.faces[r.face as usize].vertices;
+            lp.clear();
+            for i in 0..v.len() {
+                let (a, b) = (v[i] as usize, v[(i + 1) % v.len()] as usize);
+                if side[a] * sign >= 0 {
+                    lp.push(mesh.nodes[a]);
+                }
+                if side[a] * side[b] < 0 {
+                    lp.push(lerp(mesh.nodes[a], mesh.nodes[b], dist[a] / (dist[a] - dist[b])));
+                }
+            }
+            if !r.outward {
+                lp.reverse();
+            }
+            for i in 1..lp.len().saturating_sub(1) {
+                volume[p] += cleave_kernels::tet::signed_volume(on_plane, lp[0], lp[i], lp[i + 1]);
+            }
+            points[p].extend_from_slice(&lp);
+        }
+    }
+    [0, 1].map(|p| quality(volume[p], diameter(&points[p])))
 }
 
 /// Two unit vectors `(u, w)` with `(u, w, n)` right-handed.
