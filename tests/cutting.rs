@@ -319,22 +319,7 @@ proptest! {
         } else {
             box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
         };
-        // a rectangle in the plane, centred on its point
-        let n = plane.normal;
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        let n = [n[0] / len, n[1] / len, n[2] / len];
-        let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-        let cr = |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-        let u0 = cr(n, a);
-        let l = (u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2]).sqrt();
-        let u0 = [u0[0] / l, u0[1] / l, u0[2] / l];
-        let w0 = cr(n, u0);
-        let (c, s) = (twist.cos(), twist.sin());
-        let u = [c * u0[0] + s * w0[0], c * u0[1] + s * w0[1], c * u0[2] + s * w0[2]];
-        let w = cr(n, u);
-        let p = plane.point;
-        let corner = |a: f64, b: f64| [p[0] + a * u[0] + b * w[0], p[1] + a * u[1] + b * w[1], p[2] + a * u[2] + b * w[2]];
-        let polygon = [corner(-half.0, -half.1), corner(half.0, -half.1), corner(half.0, half.1), corner(-half.0, half.1)];
+        let polygon = common::rectangle_in_plane(&plane, half, twist);
         polygon_cut_and_check(&mut mesh, &polygon);
     }
 }

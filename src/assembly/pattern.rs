@@ -10,8 +10,11 @@ use crate::store::ElementStore;
 /// element's blocks land in the node's column.
 #[derive(Clone, Copy, Debug)]
 struct Incidence {
+    /// The element's batch and index in it (refreshed after every update).
     batch: u32,
     element: u32,
+    /// The element's mesh id.
+    id: u32,
     /// The node's local index in the element.
     local: u32,
     /// The element's node count `k`.
@@ -38,13 +41,15 @@ pub struct SparsePattern {
     col_stride: Vec<usize>,
     /// CSR offsets into `incidences`, one row per node.
     offsets: Vec<u32>,
-    /// Elements touching each node, in increasing (batch, element) order.
+    /// Elements touching each node, in a fixed order.
     incidences: Vec<Incidence>,
     /// For each incidence and each local row node `a` of its element: the
-    /// value index of scalar entry `(3 node_a, 3 j)` in column block `j`.
+    /// offset of scalar entry `(3 node_a, 3 j)` from the start of column
+    /// `3 j` (so a column that does not change keeps its slots).
     slots: Vec<u32>,
-    /// Value index of every scalar diagonal entry.
-    diagonal: Vec<usize>,
+    /// Offset of the diagonal block's first entry from the start of column
+    /// `3 j`, per node.
+    diagonal: Vec<u32>,
 }
 
 /// A raw pointer to the values, shared by the node tasks of one assembly.
@@ -66,38 +71,97 @@ impl SharedValues {
     }
 }
 
+/// The incidences of one node being laid out, and where their slots came
+/// from when they can be kept.
+struct Column {
+    incidences: Vec<Incidence>,
+    /// Whether the column is the same as before (rows and slots kept).
+    kept: bool,
+}
+
 impl SparsePattern {
     /// Builds the pattern of `store` over `num_blocks` blocks (nodes).
     pub fn build(num_blocks: usize, store: &ElementStore) -> Self {
-        // elements touching each node
-        let mut counts = vec![0u32; num_blocks + 1];
-        for b in &store.batches {
-            for &v in &b.nodes {
-                counts[v as usize + 1] += 1;
-            }
-        }
-        for i in 0..num_blocks {
-            counts[i + 1] += counts[i];
-        }
-        let offsets = counts.clone();
-        let mut fill = counts;
-        let mut incidences =
-            vec![Incidence { batch: 0, element: 0, local: 0, size: 0, slots: 0 }; offsets[num_blocks] as usize];
+        let mut columns: Vec<Vec<Incidence>> = vec![Vec::new(); num_blocks];
         for (bi, b) in store.batches.iter().enumerate() {
             for e in 0..b.len() {
                 for (a, &v) in b.element_nodes(e).iter().enumerate() {
-                    let p = &mut fill[v as usize];
-                    incidences[*p as usize] =
-                        Incidence { batch: bi as u32, element: e as u32, local: a as u32, size: b.k as u32, slots: 0 };
-                    *p += 1;
+                    columns[v as usize].push(Incidence {
+                        batch: bi as u32,
+                        element: e as u32,
+                        id: b.elements[e],
+                        local: a as u32,
+                        size: b.k as u32,
+                        slots: 0,
+                    });
                 }
             }
         }
-        // block rows of every block column: union of the element node sets
-        let rows: Vec<Vec<u32>> = (0..num_blocks)
-            .into_par_iter()
-            .map(|j| {
-                let mut r: Vec<u32> = incidences[offsets[j] as usize..offsets[j + 1] as usize]
+        let columns = columns.into_iter().map(|incidences| Column { incidences, kept: false }).collect();
+        Self::lay_out(store, columns, None)
+    }
+
+    /// Updates the pattern after the elements `changed` (mesh ids, sorted)
+    /// were rebuilt in `store` (see [`ElementStore::update`]); `old_nodes`
+    /// are the nodes those elements had before. Only the columns of their
+    /// nodes, old and new, are recomputed; the others are copied.
+    pub fn update(&mut self, num_blocks: usize, store: &ElementStore, changed: &[u32], old_nodes: &[u32]) {
+        let mut dirty = vec![false; num_blocks];
+        old_nodes.iter().for_each(|&v| dirty[v as usize] = true);
+        let mut added: Vec<(u32, Incidence)> = Vec::new();
+        for &e in changed {
+            let (bi, i) = store.locate[e as usize];
+            let b = &store.batches[bi as usize];
+            for (a, &v) in b.element_nodes(i as usize).iter().enumerate() {
+                dirty[v as usize] = true;
+                let inc = Incidence { batch: bi, element: i, id: e, local: a as u32, size: b.k as u32, slots: 0 };
+                added.push((v, inc));
+            }
+        }
+        added.sort_by_key(|&(v, inc)| (v, inc.id));
+        let mut added = added.into_iter().peekable();
+        let mut columns = Vec::with_capacity(num_blocks);
+        for (j, &is_dirty) in dirty.iter().enumerate() {
+            let old = self.column_incidences(j);
+            let mut incidences: Vec<Incidence> = if is_dirty {
+                old.iter().filter(|inc| changed.binary_search(&inc.id).is_err()).copied().collect()
+            } else {
+                old.to_vec()
+            };
+            while let Some((_, inc)) = added.next_if(|&(v, _)| v as usize == j) {
+                incidences.push(inc);
+            }
+            // moved entries of other elements: where they are now
+            for inc in &mut incidences {
+                (inc.batch, inc.element) = store.locate[inc.id as usize];
+            }
+            columns.push(Column { incidences, kept: !is_dirty && j < self.num_blocks });
+        }
+        *self = Self::lay_out(store, columns, Some(self));
+    }
+
+    /// The incidences of node `j` (none for a node past the pattern).
+    fn column_incidences(&self, j: usize) -> &[Incidence] {
+        match (self.offsets.get(j), self.offsets.get(j + 1)) {
+            (Some(&a), Some(&b)) => &self.incidences[a as usize..b as usize],
+            _ => &[],
+        }
+    }
+
+    /// Lays out the compressed columns of `columns`, copying the rows and
+    /// slots of kept columns from `previous`.
+    fn lay_out(store: &ElementStore, columns: Vec<Column>, previous: Option<&SparsePattern>) -> Self {
+        let num_blocks = columns.len();
+        // block rows of every recomputed column: union of its elements' nodes
+        let rows: Vec<Vec<u32>> = columns
+            .par_iter()
+            .enumerate()
+            .map(|(j, col)| {
+                if col.kept {
+                    return Vec::new();
+                }
+                let mut r: Vec<u32> = col
+                    .incidences
                     .iter()
                     .flat_map(|inc| {
                         store.batches[inc.batch as usize].element_nodes(inc.element as usize).iter().copied()
@@ -111,38 +175,54 @@ impl SparsePattern {
             .collect();
         let n = 3 * num_blocks;
         let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::new();
-        let mut col_start = Vec::with_capacity(num_blocks);
+        let mut row_idx = Vec::with_capacity(previous.map_or(0, |p| p.nnz() + p.nnz() / 8));
         let mut col_stride = Vec::with_capacity(num_blocks);
-        col_ptr.push(0usize);
-        for r in &rows {
-            col_start.push(row_idx.len());
-            col_stride.push(3 * r.len());
-            for _c in 0..3 {
-                for &i in r {
-                    row_idx.extend_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
-                }
-                col_ptr.push(row_idx.len());
-            }
-        }
-        let position = |i: u32, j: usize| -> u32 {
-            let p = rows[j].binary_search(&i).expect("pattern holds every element pair");
-            u32::try_from(col_start[j] + 3 * p).expect("fewer than 2^32 stored entries")
-        };
+        let mut diagonal = Vec::with_capacity(num_blocks);
+        let mut offsets = Vec::with_capacity(num_blocks + 1);
+        let mut incidences = Vec::new();
         let mut slots = Vec::new();
-        for j in 0..num_blocks {
-            for inc in &mut incidences[offsets[j] as usize..offsets[j + 1] as usize] {
-                inc.slots = u32::try_from(slots.len()).expect("fewer than 2^32 slots");
-                let nodes = store.batches[inc.batch as usize].element_nodes(inc.element as usize);
-                slots.extend(nodes.iter().map(|&a| position(a, j)));
+        col_ptr.push(0usize);
+        offsets.push(0u32);
+        for (j, col) in columns.into_iter().enumerate() {
+            let start = row_idx.len();
+            match previous.filter(|_| col.kept) {
+                Some(old) => {
+                    let old_col = old.symbolic.col_ptr();
+                    let (a, b) = (old_col[3 * j], old_col[3 * j + 3]);
+                    let stride = old.col_stride[j];
+                    row_idx.extend_from_slice(&old.symbolic.row_idx()[a..b]);
+                    col_ptr.extend([start + stride, start + 2 * stride, start + 3 * stride]);
+                    col_stride.push(stride);
+                    diagonal.push(old.diagonal[j]);
+                    for (inc, old_inc) in col.incidences.iter().zip(old.column_incidences(j)) {
+                        let from = old_inc.slots as usize;
+                        incidences.push(Incidence { slots: slots.len() as u32, ..*inc });
+                        slots.extend_from_slice(&old.slots[from..from + inc.size as usize]);
+                    }
+                }
+                None => {
+                    let r = &rows[j];
+                    for _c in 0..3 {
+                        for &i in r {
+                            row_idx.extend_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
+                        }
+                        col_ptr.push(row_idx.len());
+                    }
+                    col_stride.push(3 * r.len());
+                    let position = |i: u32| -> u32 {
+                        let p = r.binary_search(&i).expect("pattern holds every element pair");
+                        u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
+                    };
+                    diagonal.push(position(j as u32));
+                    for inc in &col.incidences {
+                        incidences.push(Incidence { slots: slots.len() as u32, ..*inc });
+                        let nodes = store.batches[inc.batch as usize].element_nodes(inc.element as usize);
+                        slots.extend(nodes.iter().map(|&a| position(a)));
+                    }
+                }
             }
+            offsets.push(u32::try_from(incidences.len()).expect("fewer than 2^32 incidences"));
         }
-        let diagonal = (0..n)
-            .map(|d| {
-                let (j, c) = (d / 3, d % 3);
-                position(j as u32, j) as usize + c * col_stride[j] + c
-            })
-            .collect();
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         SparsePattern { num_blocks, symbolic, col_stride, offsets, incidences, slots, diagonal }
     }
@@ -154,13 +234,13 @@ impl SparsePattern {
 
     /// Value index of the diagonal entry of scalar unknown `d`.
     pub fn diagonal_slot(&self, d: usize) -> usize {
-        self.diagonal[d]
+        self.block_slot(d / 3, d % 3, d % 3)
     }
 
     /// Value index of scalar entry `(3 j + r, 3 j + c)` of the diagonal block
     /// of node `j`.
     pub fn block_slot(&self, j: usize, r: usize, c: usize) -> usize {
-        self.diagonal[3 * j] + c * self.col_stride[j] + r
+        self.symbolic.col_ptr()[3 * j] + self.diagonal[j] as usize + c * self.col_stride[j] + r
     }
 
     /// A matrix view of `values` on this pattern.
@@ -183,7 +263,7 @@ impl SparsePattern {
         let shared = SharedValues(values.as_mut_ptr());
         let col_ptr = self.symbolic.col_ptr();
         (0..self.num_blocks).into_par_iter().with_min_len(64).for_each_init(Vec::new, |scratch, j| {
-            let stride = self.col_stride[j];
+            let (stride, base) = (self.col_stride[j], col_ptr[3 * j]);
             for p in col_ptr[3 * j]..col_ptr[3 * j + 3] {
                 // SAFETY: entries of columns 3j..3j+3 belong to this node task only.
                 unsafe { *shared.0.add(p) = 0.0 };
@@ -197,7 +277,7 @@ impl SparsePattern {
                         for r in 0..3 {
                             // SAFETY: `slot + c * stride + r` lies in column 3j + c
                             // (built above), which only this node task writes.
-                            unsafe { shared.add(slot as usize + c * stride + r, kab[3 * r + c]) };
+                            unsafe { shared.add(base + slot as usize + c * stride + r, kab[3 * r + c]) };
                         }
                     }
                 }

@@ -466,13 +466,13 @@ impl Simulation {
 
     /// Checks the touched elements of a cut mesh, carries the state over to
     /// the new nodes (in the order they were made: edge nodes, the pocket
-    /// node, then the duplicates) and installs the mesh.
+    /// node, then the duplicates), rebuilds the touched elements' data and
+    /// the pattern's columns of their nodes, and installs the mesh.
     fn apply_cut(&mut self, mesh: PolyMesh, report: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<(), Error> {
         // only the touched elements changed (the two sides of a cut carry
         // coincident nodes by design, which a whole-mesh check would flag)
         let touched: Vec<usize> = report.touched.iter().map(|&e| e as usize).collect();
         mesh.check_elements(&touched, &ValidationOptions::default())?;
-        let store = ElementStore::build(&mesh, &self.params.material, &self.params.basis)?;
         let mut state = [self.displacement.clone(), self.velocity.clone(), self.previous_velocity.clone()];
         // new nodes in the order they were made: every parent exists already
         let mut made: Vec<(u32, Vec<(u32, f64)>)> =
@@ -501,28 +501,40 @@ impl Simulation {
                 format!("internal: {} node states for {} nodes after a cut", state[0].len(), mesh.nodes.len());
             return Err(Error::Parameter(message));
         }
+        // the touched elements' nodes before the cut, then their new data
+        let old_nodes: Vec<u32> = report
+            .touched
+            .iter()
+            .filter_map(|&e| self.store.locate.get(e as usize))
+            .flat_map(|&(b, i)| self.store.batches[b as usize].element_nodes(i as usize).iter().copied())
+            .collect();
+        let t = std::time::Instant::now();
+        self.store.update(&mesh, &self.params.material, &self.params.basis, &report.touched)?;
+        self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
         let [displacement, velocity, previous_velocity] = state;
         self.displacement = displacement;
         self.velocity = velocity;
         self.previous_velocity = previous_velocity;
-        self.install(mesh, store);
+        let t = std::time::Instant::now();
+        self.pattern.update(mesh.nodes.len(), &self.store, &report.touched, &old_nodes);
+        self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
+        self.install(mesh);
         Ok(())
     }
 
-    /// Takes a new mesh and its element store: pattern, masses, rotations,
-    /// solver and scratch follow (the state vectors must already match).
-    fn install(&mut self, mesh: PolyMesh, store: ElementStore) {
+    /// Takes a new mesh whose element store and pattern are current:
+    /// masses, rotations, solver and scratch follow (the state vectors must
+    /// already match).
+    fn install(&mut self, mesh: PolyMesh) {
         let n = mesh.nodes.len();
-        self.pattern = SparsePattern::build(n, &store);
-        self.masses = store.lumped_masses(n, self.params.material.density);
-        self.corotation = Corotation::new(&store);
+        self.masses = self.store.lumped_masses(n, self.params.material.density);
+        self.corotation = Corotation::new(&self.store);
         self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
         self.analysed = false;
         self.referenced = false;
         self.values = vec![0.0; self.pattern.nnz()];
         self.boundary = mesh.boundary_triangles();
         self.mesh = mesh;
-        self.store = store;
         self.refresh_positions();
     }
 

@@ -124,6 +124,50 @@ impl Batch {
         &self.nodes[i * self.k..(i + 1) * self.k]
     }
 
+    /// The per-element arrays (each holds the same number of values per
+    /// element, possibly none).
+    fn arrays_mut(&mut self) -> [&mut dyn ChunkVec; 10] {
+        [
+            &mut self.elements,
+            &mut self.nodes,
+            &mut self.rest,
+            &mut self.volume,
+            &mut self.mass_fraction,
+            &mut self.stiffness,
+            &mut self.stress_grads,
+            &mut self.triangles,
+            &mut self.points,
+            &mut self.weights,
+        ]
+    }
+
+    /// Removes entry `i`; the last entry takes its place.
+    fn swap_remove(&mut self, i: usize) {
+        let n = self.len();
+        for array in self.arrays_mut() {
+            let per = array.len() / n;
+            array.move_chunk(n - 1, i, per);
+        }
+    }
+
+    /// Appends the entries of `other` (same kind, `k` and quadrature size).
+    fn append(&mut self, mut other: Batch) {
+        for (array, from) in self.arrays_mut().into_iter().zip(other.arrays_mut()) {
+            array.append_from(from);
+        }
+    }
+
+    /// A batch of the same kind, `k`, material and quadrature with no entries.
+    fn empty_like(&self) -> Batch {
+        Batch {
+            k: self.k,
+            kind: self.kind,
+            lame: self.lame,
+            points_per_element: self.points_per_element,
+            ..Default::default()
+        }
+    }
+
     /// Whether the batch holds closed-form linear tetrahedra.
     pub fn is_tet(&self) -> bool {
         self.stiffness.is_empty()
@@ -185,6 +229,39 @@ impl Batch {
     }
 }
 
+/// A per-element array of a batch, seen as chunks of fixed size.
+trait ChunkVec {
+    /// Number of values.
+    fn len(&self) -> usize;
+    /// Copies chunk `from` (the last) over chunk `to` and drops chunk `from`.
+    fn move_chunk(&mut self, from: usize, to: usize, per: usize);
+    /// Moves every value of `other` (the same type) to the end of `self`.
+    fn append_from(&mut self, other: &mut dyn ChunkVec);
+    /// `self` as `Any`, to recover the concrete type in `append_from`.
+    fn as_any(&mut self) -> &mut dyn std::any::Any;
+}
+
+impl<T: Copy + 'static> ChunkVec for Vec<T> {
+    fn len(&self) -> usize {
+        Vec::len(self)
+    }
+
+    fn move_chunk(&mut self, from: usize, to: usize, per: usize) {
+        self.copy_within(from * per..(from + 1) * per, to * per);
+        self.truncate(from * per);
+    }
+
+    fn append_from(&mut self, other: &mut dyn ChunkVec) {
+        if let Some(other) = other.as_any().downcast_mut::<Vec<T>>() {
+            self.append(other);
+        }
+    }
+
+    fn as_any(&mut self) -> &mut dyn std::any::Any {
+        self
+    }
+}
+
 /// How mean value elements are integrated (wicke2007 §3.4 and beyond).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum QuadratureRule {
@@ -214,7 +291,8 @@ pub struct BasisOptions {
 /// Every element of a mesh, batched by vertex count.
 #[derive(Clone, Debug, Default)]
 pub struct ElementStore {
-    /// Batches in increasing `k`.
+    /// Batches, one per `(kind, k)`: in increasing `(kind, k)` when built,
+    /// batches that later updates need are appended.
     pub batches: Vec<Batch>,
     /// For each mesh element: `(batch, index in batch)`.
     pub locate: Vec<(u32, u32)>,
@@ -224,8 +302,62 @@ impl ElementStore {
     /// Builds the store: gathers every element into its batch and computes
     /// volumes, mass fractions, `K_e` and stress-point gradients.
     pub fn build(mesh: &PolyMesh, material: &Material, options: &BasisOptions) -> Result<Self, BasisError> {
+        Self::build_elements(mesh, material, options, 0..mesh.elements.len() as u32)
+    }
+
+    /// Rebuilds the data of the `changed` elements (mesh ids; ids past the
+    /// store's element count are new elements) after a topology change and
+    /// keeps every other element's data as it is: removed entries are
+    /// filled by their batch's last entry, rebuilt ones are appended. On
+    /// error the store is unchanged.
+    pub fn update(
+        &mut self,
+        mesh: &PolyMesh,
+        material: &Material,
+        options: &BasisOptions,
+        changed: &[u32],
+    ) -> Result<(), BasisError> {
+        let fresh = Self::build_elements(mesh, material, options, changed.iter().copied())?;
+        for &e in changed {
+            if let Some(&(b, i)) = self.locate.get(e as usize) {
+                let batch = &mut self.batches[b as usize];
+                batch.swap_remove(i as usize);
+                if let Some(&moved) = batch.elements.get(i as usize) {
+                    self.locate[moved as usize] = (b, i);
+                }
+            }
+        }
+        self.locate.resize(mesh.elements.len(), (u32::MAX, u32::MAX));
+        for batch in fresh.batches {
+            let same =
+                |b: &Batch| b.kind == batch.kind && b.k == batch.k && b.points_per_element == batch.points_per_element;
+            let b = match self.batches.iter().position(same) {
+                Some(b) => b,
+                None => {
+                    self.batches.push(batch.empty_like());
+                    self.batches.len() - 1
+                }
+            };
+            let start = self.batches[b].len();
+            for (i, &e) in batch.elements.iter().enumerate() {
+                self.locate[e as usize] = (b as u32, (start + i) as u32);
+            }
+            self.batches[b].append(batch);
+        }
+        Ok(())
+    }
+
+    /// The store of the listed elements only (`locate` covers the whole
+    /// mesh; unlisted elements are located nowhere).
+    fn build_elements(
+        mesh: &PolyMesh,
+        material: &Material,
+        options: &BasisOptions,
+        elements: impl Iterator<Item = u32>,
+    ) -> Result<Self, BasisError> {
         let mut by_kind: std::collections::BTreeMap<(ElementKind, usize), Vec<u32>> = Default::default();
-        for (e, el) in mesh.elements.iter().enumerate() {
+        for e in elements {
+            let (el, e) = (&mesh.elements[e as usize], e as usize);
             let k = el.nodes.len();
             let kind = match (k, options.family) {
                 (4, _) => ElementKind::LinearTet,
@@ -249,7 +381,7 @@ impl ElementStore {
         } else {
             Vec::new()
         };
-        let mut store = ElementStore { batches: Vec::new(), locate: vec![(0, 0); mesh.elements.len()] };
+        let mut store = ElementStore { batches: Vec::new(), locate: vec![(u32::MAX, u32::MAX); mesh.elements.len()] };
         for (b, ((kind, k), elements)) in by_kind.into_iter().enumerate() {
             for (i, &e) in elements.iter().enumerate() {
                 store.locate[e as usize] = (b as u32, i as u32);
