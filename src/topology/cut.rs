@@ -101,7 +101,8 @@ pub(crate) fn separate(
     let remap = |v: &u32| if copy[*v as usize] != u32::MAX { copy[*v as usize] } else { *v };
     let mut done = vec![u32::MAX; mesh.faces.len()];
     for e in 0..mesh.elements.len() {
-        if side[e] > 0 {
+        // (node lists are refreshed below, so they still hold the originals)
+        if side[e] > 0 || !mesh.elements[e].nodes.iter().any(|&v| copy[v as usize] != u32::MAX) {
             continue;
         }
         let mut changed = false;

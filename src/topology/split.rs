@@ -128,10 +128,17 @@ fn split(
         return Err(SplitError::InvalidPlane(plane.normal));
     }
     let n = scale(plane.normal, 1.0 / len);
-    // shortest incident edge per node
+    // a node closer to the plane than `snap` times its shortest incident
+    // edge lies on it; only nodes within `snap` of the mesh's size can be
+    let dist: Vec<f64> = mesh.nodes.iter().map(|p| dot(sub(*p, plane.point), n)).collect();
+    let (lo, hi) = mesh.bounding_box();
+    let near_band = opts.snap * norm(sub(hi, lo));
     let mut h = vec![f64::INFINITY; mesh.nodes.len()];
     for face in &mesh.faces {
         let v = &face.vertices;
+        if v.iter().all(|&x| dist[x as usize].abs() > near_band) {
+            continue;
+        }
         for i in 0..v.len() {
             let (a, b) = (v[i] as usize, v[(i + 1) % v.len()] as usize);
             let l = norm(sub(mesh.nodes[a], mesh.nodes[b]));
@@ -139,12 +146,11 @@ fn split(
             h[b] = h[b].min(l);
         }
     }
-    let dist: Vec<f64> = mesh.nodes.iter().map(|p| dot(sub(*p, plane.point), n)).collect();
     let side: Vec<i8> = dist
         .iter()
         .zip(&h)
         .map(|(&d, &h)| {
-            if d.abs() <= opts.snap * h {
+            if d.abs() <= near_band && d.abs() <= opts.snap * h {
                 0
             } else if d > 0.0 {
                 1
@@ -232,18 +238,30 @@ fn split(
         crossed.iter().for_each(|&e| m[e] = true);
         m
     };
-    let mut repaired: Vec<bool> = vec![false; mesh.faces.len()];
+    // faces changed so far: split ones, and below those that gain a node
+    let mut changed: Vec<bool> = vec![false; mesh.faces.len()];
+    face_parts.keys().for_each(|&f| changed[f as usize] = true);
+    let mut on_crossed_edge = vec![false; mesh.nodes.len()];
+    for &(a, b) in edge_node.keys() {
+        on_crossed_edge[a as usize] = true;
+        on_crossed_edge[b as usize] = true;
+    }
+    let mut new_on_edges = Vec::new();
     for f in 0..mesh.faces.len() {
-        if face_parts.contains_key(&(f as u32)) {
+        let v = &mesh.faces[f].vertices;
+        if changed[f] || v.iter().filter(|&&x| on_crossed_edge[x as usize]).count() < 2 {
             continue;
         }
-        let v = mesh.faces[f].vertices.clone();
+        new_on_edges.clear();
         for i in 0..v.len() {
             let (a, b) = (v[i], v[(i + 1) % v.len()]);
             if let Some(&c) = edge_node.get(&(a.min(b), a.max(b))) {
-                mesh.faces[f].insert_on_edge(a, b, c);
-                repaired[f] = true;
+                new_on_edges.push((a, b, c));
             }
+        }
+        for &(a, b, c) in &new_on_edges {
+            mesh.faces[f].insert_on_edge(a, b, c);
+            changed[f] = true;
         }
     }
     for e in 0..mesh.elements.len() {
@@ -251,7 +269,7 @@ fn split(
             continue;
         }
         let refs = &mesh.elements[e].faces;
-        let touches = refs.iter().any(|r| face_parts.contains_key(&r.face) || repaired[r.face as usize]);
+        let touches = refs.iter().any(|r| changed[r.face as usize]);
         if !touches {
             continue;
         }
