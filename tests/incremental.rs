@@ -1,14 +1,18 @@
 //! After a cut only the touched elements are rebuilt: the updated element
 //! store and sparse pattern must equal the ones built from scratch on the
 //! cut mesh (element data bitwise, the pattern's structure exactly, the
-//! assembled matrix up to the summation order).
+//! assembled matrix up to the summation order). A cut that fails is undone
+//! from what [`Rollback`] saved, which must cover everything a cut changes.
 
 use cleave::assembly::SparsePattern;
 use cleave::material::Material;
 use cleave::mesh::PolyMesh;
+use cleave::meshing::box_l_prisms;
 use cleave::meshing::{box_tet, random_convex};
+use cleave::sim::{Simulation, SimulationParams};
+use cleave::store::Family;
 use cleave::store::{BasisOptions, ElementStore};
-use cleave::topology::{cut_by_plane, cut_by_polygon, CutReport, Plane, SplitOptions};
+use cleave::topology::{cut_by_plane, cut_by_polygon, polygon_plane, CutReport, Plane, Rollback, SplitOptions};
 use proptest::prelude::*;
 
 mod common;
@@ -131,4 +135,57 @@ fn a_cut_along_a_layer_of_nodes_only_renames_and_still_matches() {
         report
     });
     system.check();
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// Everything a cut changes in the mesh it had is saved beforehand, and
+    /// restoring puts the mesh back exactly.
+    #[test]
+    fn rollback_saves_all_a_cut_changes(
+        seed in 0u64..10_000,
+        plane in common::plane_strategy(0.1, 0.9),
+        polygon in any::<bool>(),
+        half in (0.1f64..0.6, 0.1f64..0.6),
+    ) {
+        let before = if seed % 2 == 0 {
+            random_convex([0.0; 3], [1.0; 3], 6, seed).unwrap()
+        } else {
+            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
+        };
+        let mut mesh = before.clone();
+        let corners = common::rectangle_in_plane(&plane, half, 0.3);
+        let cut_plane = if polygon { polygon_plane(&corners).unwrap() } else { plane };
+        let rollback = Rollback::around_plane(&mesh, &cut_plane, &SplitOptions::default());
+        if polygon {
+            cut_by_polygon(&mut mesh, &corners, &SplitOptions::default()).unwrap();
+        } else {
+            cut_by_plane(&mut mesh, &plane, &SplitOptions::default()).unwrap();
+        }
+        for e in 0..before.elements.len() {
+            prop_assert!(mesh.elements[e] == before.elements[e] || rollback.saved_element(e), "element {} not saved", e);
+        }
+        for f in 0..before.faces.len() {
+            prop_assert!(mesh.faces[f] == before.faces[f] || rollback.saved_face(f), "face {} not saved", f);
+        }
+        rollback.restore(&mut mesh);
+        prop_assert!(mesh == before);
+    }
+}
+
+#[test]
+fn a_cut_that_fails_half_way_leaves_the_simulation_as_it_was() {
+    // x = 0.5 runs along the notch face of the non-convex L-prism: the
+    // split finds that face in the plane after it has split other faces
+    let mesh = box_l_prisms([0.0; 3], [1.0; 3], [2, 2, 1]).unwrap();
+    let basis = BasisOptions { family: Family::Harmonic, ..Default::default() };
+    let mut sim = Simulation::new(mesh.clone(), SimulationParams { basis, ..Default::default() }).unwrap();
+    sim.step().unwrap();
+    let (u, v) = (sim.displacements().to_vec(), sim.velocities().to_vec());
+    let err = sim.cut_plane(&Plane { point: [0.5, 0.0, 0.0], normal: [1.0, 0.0, 0.0] }).unwrap_err();
+    assert!(err.to_string().contains("not convex"), "{err}");
+    assert!(sim.mesh() == &mesh, "the mesh was not restored");
+    assert_eq!((sim.displacements(), sim.velocities()), (&u[..], &v[..]));
+    sim.step().unwrap();
 }

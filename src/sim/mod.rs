@@ -31,7 +31,9 @@ use crate::material::Material;
 use crate::mesh::{PolyMesh, ValidationOptions};
 use crate::solve::{make_solver, solve_checked, LinearSolver, SolveStats, SolverKind};
 use crate::store::{BasisOptions, ElementStore};
-use crate::topology::{cut_by_plane, cut_by_polygon, CutReport, Plane, PolygonCutReport, SplitOptions};
+use crate::topology::{
+    cut_by_plane, cut_by_polygon, polygon_plane, CutReport, Plane, PolygonCutReport, Rollback, SplitOptions,
+};
 use crate::Error;
 
 /// Physical and numerical parameters of a simulation.
@@ -440,15 +442,12 @@ impl Simulation {
     /// frame: elements the plane crosses are split into convex parts, and
     /// the two sides separate (wicke2007 §5). New nodes on edges take the
     /// state interpolated along their edge, duplicated nodes the state of
-    /// their original; element data, pattern and solver analysis are
-    /// rebuilt. On error the simulation is left unchanged.
+    /// their original; only the touched elements' data and the pattern's
+    /// columns of their nodes are rebuilt. On error the simulation is left
+    /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
-        let t = std::time::Instant::now();
-        let mut mesh = self.mesh.clone();
-        let report = cut_by_plane(&mut mesh, plane, &SplitOptions::default())?;
-        self.apply_cut(mesh, &report, None)?;
-        self.timings.add(Phase::Topology, t.elapsed().as_secs_f64());
-        Ok(report)
+        self.cut(plane, |mesh| Ok((cut_by_plane(mesh, plane, &SplitOptions::default())?, None)))
+            .map(|(report, _)| report)
     }
 
     /// Cuts the body with a convex planar polygon given in the rest frame
@@ -456,19 +455,44 @@ impl Simulation {
     /// pocket where no node lies inside it. A swept blade is a sequence of
     /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
+        let plane = polygon_plane(polygon)?;
+        self.cut(&plane, |mesh| {
+            let report = cut_by_polygon(mesh, polygon, &SplitOptions::default())?;
+            Ok((report.cut, report.pocket))
+        })
+        .map(|(cut, pocket)| PolygonCutReport { cut, pocket })
+    }
+
+    /// Runs `cut` (a cut along `plane`) on the mesh in place and brings
+    /// everything else up to date; on error the mesh is rolled back.
+    fn cut(
+        &mut self,
+        plane: &Plane,
+        cut: impl FnOnce(&mut PolyMesh) -> Result<(CutReport, Option<(u32, Vec<u32>)>), Error>,
+    ) -> Result<(CutReport, Option<(u32, Vec<u32>)>), Error> {
         let t = std::time::Instant::now();
-        let mut mesh = self.mesh.clone();
-        let report = cut_by_polygon(&mut mesh, polygon, &SplitOptions::default())?;
-        self.apply_cut(mesh, &report.cut, report.pocket.as_ref())?;
-        self.timings.add(Phase::Topology, t.elapsed().as_secs_f64());
-        Ok(report)
+        let rebuild = |t: &PhaseTimings| t.basis + t.assembly;
+        let before = rebuild(&self.timings);
+        let rollback = Rollback::around_plane(&self.mesh, plane, &SplitOptions::default());
+        let result = cut(&mut self.mesh).and_then(|(report, pocket)| {
+            self.apply_cut(&report, pocket.as_ref())?;
+            Ok((report, pocket))
+        });
+        if result.is_err() {
+            rollback.restore(&mut self.mesh);
+        }
+        // the rebuild of element data and pattern is booked under its phases
+        let topology = t.elapsed().as_secs_f64() - (rebuild(&self.timings) - before);
+        self.timings.add(Phase::Topology, topology);
+        result
     }
 
     /// Checks the touched elements of a cut mesh, carries the state over to
     /// the new nodes (in the order they were made: edge nodes, the pocket
     /// node, then the duplicates), rebuilds the touched elements' data and
     /// the pattern's columns of their nodes, and installs the mesh.
-    fn apply_cut(&mut self, mesh: PolyMesh, report: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<(), Error> {
+    fn apply_cut(&mut self, report: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<(), Error> {
+        let mesh = &self.mesh;
         // only the touched elements changed (the two sides of a cut carry
         // coincident nodes by design, which a whole-mesh check would flag)
         let touched: Vec<usize> = report.touched.iter().map(|&e| e as usize).collect();
@@ -509,32 +533,31 @@ impl Simulation {
             .flat_map(|&(b, i)| self.store.batches[b as usize].element_nodes(i as usize).iter().copied())
             .collect();
         let t = std::time::Instant::now();
-        self.store.update(&mesh, &self.params.material, &self.params.basis, &report.touched)?;
+        self.store.update(mesh, &self.params.material, &self.params.basis, &report.touched)?;
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
         let [displacement, velocity, previous_velocity] = state;
         self.displacement = displacement;
         self.velocity = velocity;
         self.previous_velocity = previous_velocity;
         let t = std::time::Instant::now();
-        self.pattern.update(mesh.nodes.len(), &self.store, &report.touched, &old_nodes);
+        self.pattern.update(self.mesh.nodes.len(), &self.store, &report.touched, &old_nodes);
         self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
-        self.install(mesh);
+        self.refresh_topology();
         Ok(())
     }
 
-    /// Takes a new mesh whose element store and pattern are current:
-    /// masses, rotations, solver and scratch follow (the state vectors must
-    /// already match).
-    fn install(&mut self, mesh: PolyMesh) {
-        let n = mesh.nodes.len();
+    /// After the mesh, element store and pattern changed: masses,
+    /// rotations, solver and scratch follow (the state vectors must already
+    /// match).
+    fn refresh_topology(&mut self) {
+        let n = self.mesh.nodes.len();
         self.masses = self.store.lumped_masses(n, self.params.material.density);
         self.corotation = Corotation::new(&self.store);
         self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
         self.analysed = false;
         self.referenced = false;
         self.values = vec![0.0; self.pattern.nnz()];
-        self.boundary = mesh.boundary_triangles();
-        self.mesh = mesh;
+        self.boundary = self.mesh.boundary_triangles();
         self.refresh_positions();
     }
 

@@ -3,8 +3,10 @@
 
 mod cut;
 mod polygon;
+mod rollback;
 mod split;
 
 pub use cut::{cut_by_plane, CutReport};
-pub use polygon::{cut_by_polygon, PolygonCutReport};
+pub use polygon::{cut_by_polygon, polygon_plane, PolygonCutReport};
+pub use rollback::Rollback;
 pub use split::{split_by_plane, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};

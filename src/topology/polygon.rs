@@ -82,13 +82,11 @@ fn ccw(points: &mut [[f64; 2]]) {
     points.sort_by(|p, q| (p[1] - c[1]).atan2(p[0] - c[0]).total_cmp(&(q[1] - c[1]).atan2(q[0] - c[0])));
 }
 
-/// Cuts `mesh` with the convex planar polygon `polygon` (see module docs).
-pub fn cut_by_polygon(
-    mesh: &mut PolyMesh,
-    polygon: &[[f64; 3]],
-    opts: &SplitOptions,
-) -> Result<PolygonCutReport, SplitError> {
-    // the polygon's plane and its counter-clockwise 2-D outline
+/// The plane of a cut polygon: through its vertex mean, with the unit
+/// normal of its area vector (the polygon's vertices run counter-clockwise
+/// about it). Fails unless the polygon has at least 3 finite vertices, an
+/// area and lies in that plane.
+pub fn polygon_plane(polygon: &[[f64; 3]]) -> Result<Plane, SplitError> {
     let n_pts = polygon.len();
     if n_pts < 3 || !polygon.iter().flatten().all(|x| x.is_finite()) {
         return Err(SplitError::InvalidPolygon("needs at least 3 finite points".into()));
@@ -107,6 +105,19 @@ pub fn cut_by_polygon(
     if polygon.iter().any(|p| dot(sub(*p, centroid), normal).abs() > 1e-6 * size) {
         return Err(SplitError::InvalidPolygon("is not planar".into()));
     }
+    Ok(Plane { point: centroid, normal })
+}
+
+/// Cuts `mesh` with the convex planar polygon `polygon` (see module docs).
+pub fn cut_by_polygon(
+    mesh: &mut PolyMesh,
+    polygon: &[[f64; 3]],
+    opts: &SplitOptions,
+) -> Result<PolygonCutReport, SplitError> {
+    // the polygon's plane and its counter-clockwise 2-D outline
+    let plane = polygon_plane(polygon)?;
+    let (n_pts, centroid, normal) = (polygon.len(), plane.point, plane.normal);
+    let size = polygon.iter().map(|p| norm(sub(*p, centroid))).fold(0.0, f64::max);
     let (u, w) = plane_basis(normal);
     let frame = Frame { origin: centroid, u, w };
     let outline: Vec<[f64; 2]> = polygon.iter().map(|p| frame.project(*p)).collect();
@@ -115,7 +126,6 @@ pub fn cut_by_polygon(
             return Err(SplitError::InvalidPolygon("is not convex".into()));
         }
     }
-    let plane = Plane { point: centroid, normal };
     let dist = |x: [f64; 3]| dot(sub(x, centroid), normal);
 
     // 1. split the crossed elements whose section overlaps the polygon

@@ -131,8 +131,7 @@ fn split(
     // a node closer to the plane than `snap` times its shortest incident
     // edge lies on it; only nodes within `snap` of the mesh's size can be
     let dist: Vec<f64> = mesh.nodes.iter().map(|p| dot(sub(*p, plane.point), n)).collect();
-    let (lo, hi) = mesh.bounding_box();
-    let near_band = opts.snap * norm(sub(hi, lo));
+    let near_band = snap_band(mesh, opts);
     let mut h = vec![f64::INFINITY; mesh.nodes.len()];
     for face in &mesh.faces {
         let v = &face.vertices;
@@ -379,6 +378,14 @@ fn part_qualities(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], on_plane
         }
     }
     [0, 1].map(|p| quality(volume[p], diameter(&points[p])))
+}
+
+/// The largest distance (m) from a plane at which a split may take a node
+/// to lie on it: `snap` times the mesh's bounding box diagonal, which no
+/// edge exceeds.
+pub(crate) fn snap_band(mesh: &PolyMesh, opts: &SplitOptions) -> f64 {
+    let (lo, hi) = mesh.bounding_box();
+    opts.snap * norm(sub(hi, lo))
 }
 
 /// Two unit vectors `(u, w)` with `(u, w, n)` right-handed.
