@@ -446,8 +446,10 @@ impl Simulation {
     /// columns of their nodes are rebuilt. On error the simulation is left
     /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
-        self.cut(plane, |mesh| Ok((cut_by_plane(mesh, plane, &SplitOptions::default())?, None)))
-            .map(|(report, _)| report)
+        let cut = |mesh: &mut PolyMesh| -> Result<PolygonCutReport, Error> {
+            Ok(PolygonCutReport { cut: cut_by_plane(mesh, plane, &SplitOptions::default())?, pocket: None })
+        };
+        self.cut(plane, cut).map(|report| report.cut)
     }
 
     /// Cuts the body with a convex planar polygon given in the rest frame
@@ -456,11 +458,7 @@ impl Simulation {
     /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
         let plane = polygon_plane(polygon)?;
-        self.cut(&plane, |mesh| {
-            let report = cut_by_polygon(mesh, polygon, &SplitOptions::default())?;
-            Ok((report.cut, report.pocket))
-        })
-        .map(|(cut, pocket)| PolygonCutReport { cut, pocket })
+        self.cut(&plane, |mesh| Ok(cut_by_polygon(mesh, polygon, &SplitOptions::default())?))
     }
 
     /// Runs `cut` (a cut along `plane`) on the mesh in place and brings
@@ -468,15 +466,15 @@ impl Simulation {
     fn cut(
         &mut self,
         plane: &Plane,
-        cut: impl FnOnce(&mut PolyMesh) -> Result<(CutReport, Option<(u32, Vec<u32>)>), Error>,
-    ) -> Result<(CutReport, Option<(u32, Vec<u32>)>), Error> {
+        cut: impl FnOnce(&mut PolyMesh) -> Result<PolygonCutReport, Error>,
+    ) -> Result<PolygonCutReport, Error> {
         let t = std::time::Instant::now();
         let rebuild = |t: &PhaseTimings| t.basis + t.assembly;
         let before = rebuild(&self.timings);
         let rollback = Rollback::around_plane(&self.mesh, plane, &SplitOptions::default());
-        let result = cut(&mut self.mesh).and_then(|(report, pocket)| {
-            self.apply_cut(&report, pocket.as_ref())?;
-            Ok((report, pocket))
+        let result = cut(&mut self.mesh).and_then(|report| {
+            self.apply_cut(&report.cut, report.pocket.as_ref())?;
+            Ok(report)
         });
         if result.is_err() {
             rollback.restore(&mut self.mesh);
