@@ -71,12 +71,13 @@ impl SharedValues {
     }
 }
 
-/// The incidences of one node being laid out, and where their slots came
-/// from when they can be kept.
-struct Column {
-    incidences: Vec<Incidence>,
-    /// Whether the column is the same as before (rows and slots kept).
-    kept: bool,
+/// The incidences of one node being laid out.
+enum Column<'a> {
+    /// The same elements as in this pattern (rows and slots are copied;
+    /// only where the elements sit in the store is refreshed).
+    Kept(&'a SparsePattern),
+    /// Recomputed from these incidences.
+    New(Vec<Incidence>),
 }
 
 impl SparsePattern {
@@ -97,8 +98,7 @@ impl SparsePattern {
                 }
             }
         }
-        let columns = columns.into_iter().map(|incidences| Column { incidences, kept: false }).collect();
-        Self::lay_out(store, columns, None)
+        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), 0)
     }
 
     /// Updates the pattern after the elements `changed` (mesh ids, sorted)
@@ -122,22 +122,24 @@ impl SparsePattern {
         let mut added = added.into_iter().peekable();
         let mut columns = Vec::with_capacity(num_blocks);
         for (j, &is_dirty) in dirty.iter().enumerate() {
+            if !is_dirty && j < self.num_blocks {
+                columns.push(Column::Kept(self));
+                continue;
+            }
             let old = self.column_incidences(j);
-            let mut incidences: Vec<Incidence> = if is_dirty {
-                old.iter().filter(|inc| changed.binary_search(&inc.id).is_err()).copied().collect()
-            } else {
-                old.to_vec()
-            };
+            let mut incidences: Vec<Incidence> =
+                old.iter().filter(|inc| changed.binary_search(&inc.id).is_err()).copied().collect();
             while let Some((_, inc)) = added.next_if(|&(v, _)| v as usize == j) {
                 incidences.push(inc);
             }
-            // moved entries of other elements: where they are now
+            // entries of other elements may have moved in their batch
             for inc in &mut incidences {
                 (inc.batch, inc.element) = store.locate[inc.id as usize];
             }
-            columns.push(Column { incidences, kept: !is_dirty && j < self.num_blocks });
+            columns.push(Column::New(incidences));
         }
-        *self = Self::lay_out(store, columns, Some(self));
+        let capacity = self.nnz() + self.nnz() / 8;
+        *self = Self::lay_out(store, columns, capacity);
     }
 
     /// The incidences of node `j` (none for a node past the pattern).
@@ -148,20 +150,19 @@ impl SparsePattern {
         }
     }
 
-    /// Lays out the compressed columns of `columns`, copying the rows and
-    /// slots of kept columns from `previous`.
-    fn lay_out(store: &ElementStore, columns: Vec<Column>, previous: Option<&SparsePattern>) -> Self {
+    /// Lays out the compressed columns of `columns` (about `capacity`
+    /// entries), copying the rows and slots of kept columns.
+    fn lay_out(store: &ElementStore, columns: Vec<Column>, capacity: usize) -> Self {
         let num_blocks = columns.len();
         // block rows of every recomputed column: union of its elements' nodes
         let rows: Vec<Vec<u32>> = columns
             .par_iter()
             .enumerate()
             .map(|(j, col)| {
-                if col.kept {
+                let Column::New(incidences) = col else {
                     return Vec::new();
-                }
-                let mut r: Vec<u32> = col
-                    .incidences
+                };
+                let mut r: Vec<u32> = incidences
                     .iter()
                     .flat_map(|inc| {
                         store.batches[inc.batch as usize].element_nodes(inc.element as usize).iter().copied()
@@ -175,7 +176,7 @@ impl SparsePattern {
             .collect();
         let n = 3 * num_blocks;
         let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::with_capacity(previous.map_or(0, |p| p.nnz() + p.nnz() / 8));
+        let mut row_idx = Vec::with_capacity(capacity);
         let mut col_stride = Vec::with_capacity(num_blocks);
         let mut diagonal = Vec::with_capacity(num_blocks);
         let mut offsets = Vec::with_capacity(num_blocks + 1);
@@ -185,8 +186,8 @@ impl SparsePattern {
         offsets.push(0u32);
         for (j, col) in columns.into_iter().enumerate() {
             let start = row_idx.len();
-            match previous.filter(|_| col.kept) {
-                Some(old) => {
+            match col {
+                Column::Kept(old) => {
                     let old_col = old.symbolic.col_ptr();
                     let (a, b) = (old_col[3 * j], old_col[3 * j + 3]);
                     let stride = old.col_stride[j];
@@ -194,27 +195,26 @@ impl SparsePattern {
                     col_ptr.extend([start + stride, start + 2 * stride, start + 3 * stride]);
                     col_stride.push(stride);
                     diagonal.push(old.diagonal[j]);
-                    for (inc, old_inc) in col.incidences.iter().zip(old.column_incidences(j)) {
-                        let from = old_inc.slots as usize;
-                        incidences.push(Incidence { slots: slots.len() as u32, ..*inc });
+                    for inc in old.column_incidences(j) {
+                        let from = inc.slots as usize;
+                        let (batch, element) = store.locate[inc.id as usize];
+                        incidences.push(Incidence { batch, element, slots: slots.len() as u32, ..*inc });
                         slots.extend_from_slice(&old.slots[from..from + inc.size as usize]);
                     }
                 }
-                None => {
+                Column::New(new_incidences) => {
                     let r = &rows[j];
-                    for _c in 0..3 {
-                        for &i in r {
-                            row_idx.extend_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
-                        }
-                        col_ptr.push(row_idx.len());
-                    }
+                    row_idx.extend(r.iter().flat_map(|&i| [3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]));
+                    row_idx.extend_from_within(start..);
+                    row_idx.extend_from_within(start..start + 3 * r.len());
+                    col_ptr.extend([start + 3 * r.len(), start + 6 * r.len(), start + 9 * r.len()]);
                     col_stride.push(3 * r.len());
                     let position = |i: u32| -> u32 {
                         let p = r.binary_search(&i).expect("pattern holds every element pair");
                         u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
                     };
                     diagonal.push(position(j as u32));
-                    for inc in &col.incidences {
+                    for inc in &new_incidences {
                         incidences.push(Incidence { slots: slots.len() as u32, ..*inc });
                         let nodes = store.batches[inc.batch as usize].element_nodes(inc.element as usize);
                         slots.extend(nodes.iter().map(|&a| position(a)));

@@ -554,7 +554,8 @@ impl Simulation {
         self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
         self.analysed = false;
         self.referenced = false;
-        self.values = vec![0.0; self.pattern.nnz()];
+        // every entry is written by the next assembly
+        self.values.resize(self.pattern.nnz(), 0.0);
         self.boundary = self.mesh.boundary_triangles();
         self.refresh_positions();
     }

@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 
 use super::cut::{element_sides, separate, CutReport};
-use super::split::{plane_basis, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions};
+use super::split::{plane_basis, snap_band, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions};
 use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
 
 /// What a polygon cut changed, beyond a plane cut's report.
@@ -129,11 +129,12 @@ pub fn cut_by_polygon(
     let dist = |x: [f64; 3]| dot(sub(x, centroid), normal);
 
     // 1. split the crossed elements whose section overlaps the polygon
+    let node_dist: Vec<f64> = mesh.nodes.iter().map(|&x| dist(x)).collect();
     let chosen: Vec<u32> = (0..mesh.elements.len())
         .filter(|&e| {
             let el = &mesh.elements[e];
-            let d: Vec<f64> = el.nodes.iter().map(|&v| dist(mesh.nodes[v as usize])).collect();
-            if !(d.iter().any(|&x| x > 0.0) && d.iter().any(|&x| x < 0.0)) {
+            let d = el.nodes.iter().map(|&v| node_dist[v as usize]);
+            if !(d.clone().any(|x| x > 0.0) && d.clone().any(|x| x < 0.0)) {
                 return false;
             }
             // the section: crossings of the element's edges and vertices on the plane
@@ -163,41 +164,66 @@ pub fn cut_by_polygon(
     // 2. the faces in the plane and who uses them; an element kept whole
     // (a part would have been a sliver) is cut around: its faces towards
     // the other side take the place of the cap it did not get
-    let mut in_plane: Vec<u32> = split.caps.clone();
+    // everything below happens in the region of the elements with a node
+    // in the plane's snapping band or shared with a chosen element (every
+    // face in the plane, around a face in it or of a chosen element is
+    // one of theirs)
+    let band = snap_band(mesh, opts);
+    let mut marked: Vec<bool> = mesh.nodes.iter().map(|&x| dist(x).abs() <= band).collect();
+    let chosen_parts = chosen.iter().chain(split.split_elements.iter().map(|(_, neg)| neg));
+    for &e in chosen_parts {
+        mesh.elements[e as usize].nodes.iter().for_each(|&v| marked[v as usize] = true);
+    }
+    let region: Vec<u32> = (0..mesh.elements.len() as u32)
+        .filter(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| marked[v as usize]))
+        .collect();
+    let mut region_faces: Vec<u32> =
+        region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
+    region_faces.sort_unstable();
+    region_faces.dedup();
     let mut users: HashMap<u32, Vec<u32>> = HashMap::new();
-    for (e, el) in mesh.elements.iter().enumerate() {
-        for r in &el.faces {
-            users.entry(r.face).or_default().push(e as u32);
+    for &e in &region {
+        for r in &mesh.elements[e as usize].faces {
+            users.entry(r.face).or_default().push(e);
         }
     }
+    let mut in_plane: Vec<u32> = split.caps.clone();
+    let mut listed = vec![false; mesh.faces.len()];
+    in_plane.iter().for_each(|&f| listed[f as usize] = true);
     let side = element_sides(mesh, &plane);
     let mut detour: Vec<u32> = Vec::new();
     for &e in &split.kept_whole {
         for r in &mesh.elements[e as usize].faces {
             let across = users[&r.face].iter().any(|&o| side[o as usize] != side[e as usize]);
-            if across && !in_plane.contains(&r.face) {
+            if across && !listed[r.face as usize] {
+                listed[r.face as usize] = true;
                 in_plane.push(r.face);
                 detour.push(r.face);
             }
         }
     }
-    for (f, face) in mesh.faces.iter().enumerate() {
+    for &f in &region_faces {
+        let face = &mesh.faces[f as usize];
+        if listed[f as usize]
+            || users[&f].len() != 2
+            || face.vertices.iter().any(|&v| !(dist(mesh.nodes[v as usize]).abs() <= band))
+        {
+            continue;
+        }
         let g = face_geometry(&mesh.nodes, &face.vertices);
-        let flat = face.vertices.iter().all(|&v| dist(mesh.nodes[v as usize]).abs() <= opts.snap * g.diameter);
-        if flat && users.get(&(f as u32)).is_some_and(|u| u.len() == 2) && !in_plane.contains(&(f as u32)) {
-            in_plane.push(f as u32);
+        if face.vertices.iter().all(|&v| dist(mesh.nodes[v as usize]).abs() <= opts.snap * g.diameter) {
+            listed[f as usize] = true;
+            in_plane.push(f);
         }
     }
     // faces touching each node of the plane (stale entries are re-checked)
     let mut node_faces: HashMap<u32, Vec<u32>> = HashMap::new();
     let on_plane: std::collections::HashSet<u32> =
         in_plane.iter().flat_map(|&f| mesh.faces[f as usize].vertices.iter().copied()).collect();
-    {
-        for (f, face) in mesh.faces.iter().enumerate() {
-            for &v in &face.vertices {
-                if on_plane.contains(&v) {
-                    node_faces.entry(v).or_default().push(f as u32);
-                }
+    for &f in &region_faces {
+        for &v in &mesh.faces[f as usize].vertices {
+            if on_plane.contains(&v) {
+                node_faces.entry(v).or_default().push(f);
             }
         }
     }

@@ -13,16 +13,46 @@
 use cleave_kernels::vec3::{dot, norm, sub};
 
 use super::split::{snap_band, Plane, SplitOptions};
-use crate::mesh::{Element, Face, PolyMesh};
+use crate::mesh::{Element, Face, FaceRef, PolyMesh};
 
-/// What a cut may change, saved before it runs.
+/// What a cut may change, saved before it runs (flat, so saving costs no
+/// allocation per element or face).
 #[derive(Clone, Debug)]
 pub struct Rollback {
     nodes: usize,
     faces: usize,
     elements: usize,
-    saved_elements: Vec<(u32, Element)>,
-    saved_faces: Vec<(u32, Face)>,
+    /// Saved elements (sorted ids), their face references and nodes.
+    elements_saved: Vec<u32>,
+    element_faces: Flat<FaceRef>,
+    element_nodes: Flat<u32>,
+    /// Saved faces (sorted ids), their loops and triangles.
+    faces_saved: Vec<u32>,
+    face_vertices: Flat<u32>,
+    face_triangles: Flat<[u32; 3]>,
+}
+
+/// Lists of values, one after another.
+#[derive(Clone, Debug)]
+struct Flat<T> {
+    values: Vec<T>,
+    ends: Vec<usize>,
+}
+
+impl<T: Copy> Flat<T> {
+    fn new() -> Self {
+        Flat { values: Vec::new(), ends: Vec::new() }
+    }
+
+    fn push(&mut self, list: &[T]) {
+        self.values.extend_from_slice(list);
+        self.ends.push(self.values.len());
+    }
+
+    fn get(&self, i: usize) -> Vec<T> {
+        let start = if i == 0 { 0 } else { self.ends[i - 1] };
+        self.values[start..self.ends[i]].to_vec()
+    }
 }
 
 impl Rollback {
@@ -32,46 +62,55 @@ impl Rollback {
     pub fn around_plane(mesh: &PolyMesh, plane: &Plane, opts: &SplitOptions) -> Self {
         let band = snap_band(mesh, opts);
         let len = norm(plane.normal);
-        let dist = |v: u32| dot(sub(mesh.nodes[v as usize], plane.point), plane.normal) / len;
+        let dist: Vec<f64> = mesh.nodes.iter().map(|&x| dot(sub(x, plane.point), plane.normal) / len).collect();
         let mut near = vec![false; mesh.nodes.len()];
         for el in &mesh.elements {
-            let (lo, hi) = el
-                .nodes
-                .iter()
-                .map(|&v| dist(v))
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
+            let (lo, hi) = el.nodes.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(dist[v as usize]), hi.max(dist[v as usize]))
+            });
             // a NaN plane reaches everything
             if !(lo > band || hi < -band) {
                 el.nodes.iter().for_each(|&v| near[v as usize] = true);
             }
         }
-        let mut saved_elements = Vec::new();
-        let mut face_saved = vec![false; mesh.faces.len()];
-        for (e, el) in mesh.elements.iter().enumerate() {
-            if el.nodes.iter().any(|&v| near[v as usize]) {
-                saved_elements.push((e as u32, el.clone()));
-                el.faces.iter().for_each(|r| face_saved[r.face as usize] = true);
-            }
-        }
-        let saved_faces =
-            (0..mesh.faces.len()).filter(|&f| face_saved[f]).map(|f| (f as u32, mesh.faces[f].clone())).collect();
-        Rollback {
+        let mut saved = Rollback {
             nodes: mesh.nodes.len(),
             faces: mesh.faces.len(),
             elements: mesh.elements.len(),
-            saved_elements,
-            saved_faces,
+            elements_saved: Vec::new(),
+            element_faces: Flat::new(),
+            element_nodes: Flat::new(),
+            faces_saved: Vec::new(),
+            face_vertices: Flat::new(),
+            face_triangles: Flat::new(),
+        };
+        let mut face_saved = vec![false; mesh.faces.len()];
+        for (e, el) in mesh.elements.iter().enumerate() {
+            if el.nodes.iter().any(|&v| near[v as usize]) {
+                saved.elements_saved.push(e as u32);
+                saved.element_faces.push(&el.faces);
+                saved.element_nodes.push(&el.nodes);
+                el.faces.iter().for_each(|r| face_saved[r.face as usize] = true);
+            }
         }
+        for (f, face) in mesh.faces.iter().enumerate() {
+            if face_saved[f] {
+                saved.faces_saved.push(f as u32);
+                saved.face_vertices.push(&face.vertices);
+                saved.face_triangles.push(&face.triangles);
+            }
+        }
+        saved
     }
 
     /// Whether element `e` (of the mesh before the cut) was saved.
     pub fn saved_element(&self, e: usize) -> bool {
-        self.saved_elements.binary_search_by_key(&(e as u32), |(id, _)| *id).is_ok()
+        self.elements_saved.binary_search(&(e as u32)).is_ok()
     }
 
     /// Whether face `f` (of the mesh before the cut) was saved.
     pub fn saved_face(&self, f: usize) -> bool {
-        self.saved_faces.binary_search_by_key(&(f as u32), |(id, _)| *id).is_ok()
+        self.faces_saved.binary_search(&(f as u32)).is_ok()
     }
 
     /// Puts `mesh` back as it was when this was saved.
@@ -79,11 +118,12 @@ impl Rollback {
         mesh.nodes.truncate(self.nodes);
         mesh.faces.truncate(self.faces);
         mesh.elements.truncate(self.elements);
-        for (f, face) in self.saved_faces {
-            mesh.faces[f as usize] = face;
+        for (i, &f) in self.faces_saved.iter().enumerate() {
+            mesh.faces[f as usize] =
+                Face { vertices: self.face_vertices.get(i), triangles: self.face_triangles.get(i) };
         }
-        for (e, el) in self.saved_elements {
-            mesh.elements[e as usize] = el;
+        for (i, &e) in self.elements_saved.iter().enumerate() {
+            mesh.elements[e as usize] = Element { faces: self.element_faces.get(i), nodes: self.element_nodes.get(i) };
         }
     }
 }
