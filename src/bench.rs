@@ -290,7 +290,8 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
     if !quick && bunny.exists() {
         let mesh = crate::io::read_mesh(bunny)?;
         out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cg, 20)?);
-        out.extend(step_measurements("bunny_100k", mesh, SolverKind::Cholesky, 3)?);
+        out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cholesky, 3)?);
+        out.extend(large_cut_measurements(mesh)?);
     }
     let bunny = std::path::Path::new("assets/bunny_5k.mesh");
     if bunny.exists() {
@@ -306,15 +307,7 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
 /// cuts of `scenes/bunny_cut.toml`), and per cut from cut to ready system.
 fn cut_measurements(mesh: PolyMesh) -> Result<Vec<Measurement>, Error> {
     let label = "bunny_5k";
-    let params = SimulationParams {
-        material: Material::new(5e6, 0.35, 1000.0)?,
-        gravity: [0.0, -9.81, 0.0],
-        dt: 0.01,
-        mass_damping: 0.3,
-        ..Default::default()
-    };
-    let mut sim = Simulation::new(mesh, params)?;
-    sim.add_collider(Collider::new([0.0, -0.05, 0.0], [0.0, 1.0, 0.0], 1e9)?);
+    let mut sim = cut_simulation(mesh, SolverKind::default())?;
     let per_step = |sim: &mut Simulation| -> Result<f64, Error> {
         let t = Instant::now();
         for _ in 0..10 {
@@ -325,8 +318,8 @@ fn cut_measurements(mesh: PolyMesh) -> Result<Vec<Measurement>, Error> {
     let before = per_step(&mut sim)?;
     let (ne0, nn0) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
     let t = Instant::now();
-    sim.cut_plane(&crate::topology::Plane { point: [0.0, 6.5, 0.0], normal: [0.2, 1.0, 0.3] })?;
-    sim.cut_plane(&crate::topology::Plane { point: [2.0, 0.0, 0.0], normal: [1.0, 0.1, 0.0] })?;
+    sim.cut_plane(&Plane { point: [0.0, 6.5, 0.0], normal: [0.2, 1.0, 0.3] })?;
+    sim.cut_plane(&Plane { point: [2.0, 0.0, 0.0], normal: [1.0, 0.1, 0.0] })?;
     let cut = t.elapsed().as_secs_f64() * 1e3 / 2.0;
     let after = per_step(&mut sim)?;
     let (ne1, nn1) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
@@ -344,6 +337,68 @@ fn cut_measurements(mesh: PolyMesh) -> Result<Vec<Measurement>, Error> {
         Measurement { extra: None, ..m("plane cut (to ready)", cut, ne1, nn1) },
         m("step after cuts", after, ne1, nn1),
     ])
+}
+
+/// The bunny falling onto the ground (E = 5e6 Pa, ν = 0.35, ρ = 1000
+/// kg/m³, h = 0.01 s), as in `scenes/bunny_cut.toml`, solved by `solver`.
+fn cut_simulation(mesh: PolyMesh, solver: SolverKind) -> Result<Simulation, Error> {
+    let params = SimulationParams {
+        material: Material::new(5e6, 0.35, 1000.0)?,
+        gravity: [0.0, -9.81, 0.0],
+        dt: 0.01,
+        mass_damping: 0.3,
+        solver,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(mesh, params)?;
+    sim.add_collider(Collider::new([0.0, -0.05, 0.0], [0.0, 1.0, 0.0], 1e9)?);
+    Ok(sim)
+}
+
+/// Time from a cut to a ready system on the large bunny, after one step
+/// (conjugate gradients, which need no analysis of the new pattern):
+/// six 3 m square blade cuts across its body (about a thousand elements
+/// split each) and three plane cuts through its head, each row the mean
+/// per cut with the mean number of elements the cut crossed.
+fn large_cut_measurements(mesh: PolyMesh) -> Result<Vec<Measurement>, Error> {
+    let mut sim = cut_simulation(mesh, SolverKind::Cg)?;
+    sim.step()?;
+    let mut rows = Vec::new();
+    let mut measure = |sim: &mut Simulation,
+                       name: &str,
+                       cuts: usize,
+                       cut: &mut dyn FnMut(&mut Simulation, usize) -> Result<usize, Error>|
+     -> Result<(), Error> {
+        let (mut ms, mut crossed) = (0.0, 0);
+        for i in 0..cuts {
+            let t = Instant::now();
+            crossed += cut(sim, i)?;
+            ms += t.elapsed().as_secs_f64() * 1e3;
+        }
+        let (ne, nn) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
+        rows.push(Measurement {
+            name: name.into(),
+            mesh: "bunny_100k".into(),
+            elements: ne,
+            nodes: nn,
+            ms: ms / cuts as f64,
+            elements_per_s: crossed as f64 / (ms * 1e-3),
+            extra: Some(("crossed per cut".into(), crossed as f64 / cuts as f64)),
+        });
+        Ok(())
+    };
+    measure(&mut sim, "blade cut (to ready)", 6, &mut |sim, i| {
+        let (x, y, z, half) = (-2.0 + 0.7 * i as f64, 3.0, 0.0, 1.5);
+        let square =
+            [[x, y - half, z - half], [x, y + half, z - half], [x, y + half, z + half], [x, y - half, z + half]];
+        let report = sim.cut_polygon(&square)?;
+        Ok(report.cut.split.split_elements.len() + report.cut.split.kept_whole.len())
+    })?;
+    measure(&mut sim, "plane cut (to ready)", 3, &mut |sim, i| {
+        let report = sim.cut_plane(&Plane { point: [0.0, 7.0 + 0.5 * i as f64, 0.0], normal: [0.1, 1.0, 0.0] })?;
+        Ok(report.split.split_elements.len() + report.split.kept_whole.len())
+    })?;
+    Ok(rows)
 }
 
 /// Per-phase wall time per step of `steps` corotated implicit Euler steps
