@@ -98,7 +98,9 @@ impl SparsePattern {
                 }
             }
         }
-        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), 0)
+        let incidences: usize = columns.iter().map(Vec::len).sum();
+        let slots = columns.iter().flatten().map(|inc| inc.size as usize).sum();
+        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), [0, incidences, slots])
     }
 
     /// Updates the pattern after the elements `changed` (mesh ids, sorted)
@@ -138,7 +140,9 @@ impl SparsePattern {
             }
             columns.push(Column::New(incidences));
         }
-        let capacity = self.nnz() + self.nnz() / 8;
+        // room for what a cut adds, so the arrays are not regrown
+        let room = |n: usize| n + n / 8;
+        let capacity = [room(self.nnz()), room(self.incidences.len()), room(self.slots.len())];
         *self = Self::lay_out(store, columns, capacity);
     }
 
@@ -150,9 +154,10 @@ impl SparsePattern {
         }
     }
 
-    /// Lays out the compressed columns of `columns` (about `capacity`
-    /// entries), copying the rows and slots of kept columns.
-    fn lay_out(store: &ElementStore, columns: Vec<Column>, capacity: usize) -> Self {
+    /// Lays out the compressed columns of `columns`, copying the rows and
+    /// slots of kept columns; `capacity` is the expected number of entries,
+    /// incidences and slots.
+    fn lay_out(store: &ElementStore, columns: Vec<Column>, capacity: [usize; 3]) -> Self {
         let num_blocks = columns.len();
         // block rows of every recomputed column: union of its elements' nodes
         let rows: Vec<Vec<u32>> = columns
@@ -176,12 +181,12 @@ impl SparsePattern {
             .collect();
         let n = 3 * num_blocks;
         let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::with_capacity(capacity);
+        let mut row_idx = Vec::with_capacity(capacity[0]);
         let mut col_stride = Vec::with_capacity(num_blocks);
         let mut diagonal = Vec::with_capacity(num_blocks);
         let mut offsets = Vec::with_capacity(num_blocks + 1);
-        let mut incidences = Vec::new();
-        let mut slots = Vec::new();
+        let mut incidences = Vec::with_capacity(capacity[1]);
+        let mut slots = Vec::with_capacity(capacity[2]);
         col_ptr.push(0usize);
         offsets.push(0u32);
         for (j, col) in columns.into_iter().enumerate() {
