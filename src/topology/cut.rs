@@ -9,7 +9,9 @@
 //! sides shared become two boundary faces and the body opens there.
 //! Positions are in the mesh's rest (material) frame.
 
-use super::split::{split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
+use cleave_kernels::vec3::{dot, norm, sub};
+
+use super::split::{snap_band, split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
 use crate::mesh::{Face, PolyMesh};
 
 /// What a plane cut changed.
@@ -24,31 +26,45 @@ pub struct CutReport {
     pub touched: Vec<u32>,
 }
 
-/// Side of every element with respect to `plane` (+1 or -1): the side of
-/// its first vertex off the plane (after a split no element straddles it;
-/// an element lying within the snapping distance counts as positive).
-pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane) -> Vec<i8> {
-    let n = plane.normal;
-    let dist = |v: u32| (0..3).map(|i| (mesh.nodes[v as usize][i] - plane.point[i]) * n[i]).sum::<f64>();
-    mesh.elements
-        .iter()
-        .map(|el| {
-            // the vertex farthest from the plane decides
-            let d = el.nodes.iter().map(|&v| dist(v)).fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m });
-            if d < 0.0 {
-                -1
-            } else {
-                1
-            }
-        })
+/// The elements a separation along `plane` can involve, in increasing
+/// order: those with a node within `band` of the plane (the snapping
+/// band) or shared with an element `split` split or kept whole. Every
+/// element holding a node that elements on both sides use is among them:
+/// such a node lies in the band, or on an element the plane crossed.
+pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, band: f64, split: &SplitReport) -> Vec<u32> {
+    let len = norm(plane.normal);
+    let mut marked: Vec<bool> =
+        mesh.nodes.iter().map(|&x| (dot(sub(x, plane.point), plane.normal) / len).abs() <= band).collect();
+    let crossed = split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.kept_whole.iter().copied());
+    for e in crossed {
+        mesh.elements[e as usize].nodes.iter().for_each(|&v| marked[v as usize] = true);
+    }
+    (0..mesh.elements.len() as u32)
+        .filter(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| marked[v as usize]))
         .collect()
+}
+
+/// Side of the `region` elements with respect to `plane` (+1 or -1, 0 for
+/// elements outside the region): the side of the element's vertex
+/// farthest from the plane (after a split no element straddles it but
+/// those kept whole, which go with their larger part).
+pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32]) -> Vec<i8> {
+    let dist = |v: u32| dot(sub(mesh.nodes[v as usize], plane.point), plane.normal);
+    let mut side = vec![0; mesh.elements.len()];
+    for &e in region {
+        let nodes = &mesh.elements[e as usize].nodes;
+        let d = nodes.iter().map(|&v| dist(v)).fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m });
+        side[e as usize] = if d < 0.0 { -1 } else { 1 };
+    }
+    side
 }
 
 /// Splits along `plane` and separates the two sides (see module docs).
 pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<CutReport, SplitError> {
     let split = split_by_plane(mesh, plane, opts)?;
-    let side = element_sides(mesh, plane);
-    let (duplicated, mut touched) = separate(mesh, &side, |_| true, |_| true);
+    let region = cut_region(mesh, plane, snap_band(mesh, opts), &split);
+    let side = element_sides(mesh, plane, &region);
+    let (duplicated, mut touched) = separate(mesh, &region, &side, |_| true, |_| true);
     touched.extend(split.split_elements.iter().flat_map(|&(a, b)| [a, b]));
     touched.extend(split.repaired_elements.iter().copied());
     touched.sort_unstable();
@@ -62,27 +78,32 @@ pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> 
 /// the negative side taking the copy; a face shared by the two
 /// sides is separated (the negative side gets its own copy) when
 /// `separable(face)`, and every other face of the negative side has its
-/// nodes renamed. Returns the `(original, copy)` pairs and the elements
-/// whose faces changed.
+/// nodes renamed. Only the `region` elements ([`cut_region`]) are looked
+/// at, with their `side`s. Returns the `(original, copy)` pairs and the
+/// elements whose faces changed.
 pub(crate) fn separate(
     mesh: &mut PolyMesh,
+    region: &[u32],
     side: &[i8],
     may_split: impl Fn(u32) -> bool,
     separable: impl Fn(u32) -> bool,
 ) -> (Vec<(u32, u32)>, Vec<u32>) {
     // which sides use each node and each face
-    let bit = |e: usize| if side[e] > 0 { 1u8 } else { 2 };
+    let bit = |e: u32| if side[e as usize] > 0 { 1u8 } else { 2 };
     let mut used = vec![0u8; mesh.nodes.len()];
     let mut face_sides = vec![0u8; mesh.faces.len()];
-    for (e, el) in mesh.elements.iter().enumerate() {
+    let mut region_faces = Vec::new();
+    for &e in region {
+        let el = &mesh.elements[e as usize];
         el.nodes.iter().for_each(|&v| used[v as usize] |= bit(e));
         el.faces.iter().for_each(|r| face_sides[r.face as usize] |= bit(e));
+        region_faces.extend(el.faces.iter().map(|r| r.face));
     }
     // a node on a face the two sides share but keep joined stays single
     // (opening it would tear that face)
-    for (f, face) in mesh.faces.iter().enumerate() {
-        if face_sides[f] == 3 && !separable(f as u32) {
-            face.vertices.iter().for_each(|&v| used[v as usize] = 0);
+    for &f in &region_faces {
+        if face_sides[f as usize] == 3 && !separable(f) {
+            mesh.faces[f as usize].vertices.iter().for_each(|&v| used[v as usize] = 0);
         }
     }
     let mut copy = vec![u32::MAX; mesh.nodes.len()];
@@ -100,7 +121,7 @@ pub(crate) fn separate(
     }
     let remap = |v: &u32| if copy[*v as usize] != u32::MAX { copy[*v as usize] } else { *v };
     let mut done = vec![u32::MAX; mesh.faces.len()];
-    for e in 0..mesh.elements.len() {
+    for e in region.iter().map(|&e| e as usize) {
         // (node lists are refreshed below, so they still hold the originals)
         if side[e] > 0 || !mesh.elements[e].nodes.iter().any(|&v| copy[v as usize] != u32::MAX) {
             continue;

@@ -17,7 +17,7 @@ use std::collections::HashMap;
 
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 
-use super::cut::{element_sides, separate, CutReport};
+use super::cut::{cut_region, element_sides, separate, CutReport};
 use super::split::{plane_basis, snap_band, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions};
 use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
 
@@ -164,19 +164,11 @@ pub fn cut_by_polygon(
     // 2. the faces in the plane and who uses them; an element kept whole
     // (a part would have been a sliver) is cut around: its faces towards
     // the other side take the place of the cap it did not get
-    // everything below happens in the region of the elements with a node
-    // in the plane's snapping band or shared with a chosen element (every
-    // face in the plane, around a face in it or of a chosen element is
-    // one of theirs)
+    // everything below happens in the region of the elements near the
+    // plane or the elements it crossed (every face in the plane, around a
+    // face in it or of a crossed element is one of theirs)
     let band = snap_band(mesh, opts);
-    let mut marked: Vec<bool> = mesh.nodes.iter().map(|&x| dist(x).abs() <= band).collect();
-    let chosen_parts = chosen.iter().chain(split.split_elements.iter().map(|(_, neg)| neg));
-    for &e in chosen_parts {
-        mesh.elements[e as usize].nodes.iter().for_each(|&v| marked[v as usize] = true);
-    }
-    let region: Vec<u32> = (0..mesh.elements.len() as u32)
-        .filter(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| marked[v as usize]))
-        .collect();
+    let region = cut_region(mesh, &plane, band, &split);
     let mut region_faces: Vec<u32> =
         region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
     region_faces.sort_unstable();
@@ -190,7 +182,7 @@ pub fn cut_by_polygon(
     let mut in_plane: Vec<u32> = split.caps.clone();
     let mut listed = vec![false; mesh.faces.len()];
     in_plane.iter().for_each(|&f| listed[f as usize] = true);
-    let side = element_sides(mesh, &plane);
+    let side = element_sides(mesh, &plane, &region);
     let mut detour: Vec<u32> = Vec::new();
     for &e in &split.kept_whole {
         for r in &mesh.elements[e as usize].faces {
@@ -388,6 +380,7 @@ pub fn cut_by_polygon(
     }
     let (duplicated, renamed) = separate(
         mesh,
+        &region,
         &side,
         |v| inner.get(v as usize).copied().unwrap_or(false),
         |f| inside_faces.binary_search(&f).is_ok(),

@@ -1,13 +1,14 @@
 //! Splitting convex elements by a plane.
 //!
 //! Every element that has nodes strictly on both sides of the plane (among
-//! the chosen ones, for a local split) is replaced by its two convex parts. One new node is made per crossed global
-//! edge and shared by every element on that edge; every crossed face is split
-//! into two faces shared like the original; both parts get a common cap face.
-//! A node closer to the plane than `snap` times its shortest incident edge is
+//! the chosen ones, for a local split) is replaced by its two convex parts.
+//! One new node is made per crossed global edge and shared by every element
+//! on that edge; every crossed face is split into two faces shared like the
+//! original; both parts get a common cap face. A node closer to the plane
+//! than `snap` times its shortest edge in the elements the plane crosses is
 //! taken to lie on it (used instead of a new node), so no edge shorter than
-//! that fraction ever appears. The mesh stays conforming by construction and
-//! the total volume is unchanged (the cap is shared with opposite
+//! that fraction ever appears. The mesh stays conforming by construction
+//! and the total volume is unchanged (the cap is shared with opposite
 //! orientations).
 //!
 //! Slivers (wicke2007 §4) are not made in the first place: an element whose
@@ -38,8 +39,8 @@ pub struct Plane {
 /// Tolerances of a split.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SplitOptions {
-    /// Relative snapping distance (fraction of a node's shortest incident
-    /// edge). Default `1e-4`.
+    /// Relative snapping distance (fraction of a node's shortest edge in the
+    /// crossed elements). Default `1e-4`.
     pub snap: f64,
     /// Smallest [`quality`] a part of a split element may have; an element
     /// that would leave a flatter part is kept whole. Default `0.02`: a part
@@ -128,16 +129,23 @@ fn split(
         return Err(SplitError::InvalidPlane(plane.normal));
     }
     let n = scale(plane.normal, 1.0 / len);
-    // a node closer to the plane than `snap` times its shortest incident
-    // edge lies on it; only nodes within `snap` of the mesh's size can be
+    // only elements with nodes strictly on both sides can be split or hold
+    // an edge the plane crosses; a node of theirs closer to the plane than
+    // `snap` times its shortest edge in them lies on it
     let dist: Vec<f64> = mesh.nodes.iter().map(|p| dot(sub(*p, plane.point), n)).collect();
-    let near_band = snap_band(mesh, opts);
+    let straddling: Vec<usize> = (0..mesh.elements.len())
+        .filter(|&e| {
+            let d = mesh.elements[e].nodes.iter().map(|&v| dist[v as usize]);
+            d.clone().any(|x| x > 0.0) && d.clone().any(|x| x < 0.0)
+        })
+        .collect();
+    let mut nearby_faces: Vec<u32> =
+        straddling.iter().flat_map(|&e| mesh.elements[e].faces.iter().map(|r| r.face)).collect();
+    nearby_faces.sort_unstable();
+    nearby_faces.dedup();
     let mut h = vec![f64::INFINITY; mesh.nodes.len()];
-    for face in &mesh.faces {
-        let v = &face.vertices;
-        if v.iter().all(|&x| dist[x as usize].abs() > near_band) {
-            continue;
-        }
+    for &f in &nearby_faces {
+        let v = &mesh.faces[f as usize].vertices;
         for i in 0..v.len() {
             let (a, b) = (v[i] as usize, v[(i + 1) % v.len()] as usize);
             let l = norm(sub(mesh.nodes[a], mesh.nodes[b]));
@@ -149,7 +157,7 @@ fn split(
         .iter()
         .zip(&h)
         .map(|(&d, &h)| {
-            if d.abs() <= near_band && d.abs() <= opts.snap * h {
+            if d == 0.0 || d.abs() <= opts.snap * h {
                 0
             } else if d > 0.0 {
                 1
@@ -165,7 +173,9 @@ fn split(
         }
     }
     let mut report = SplitReport::default();
-    let (crossed, kept_whole): (Vec<usize>, Vec<usize>) = (0..mesh.elements.len())
+    let (crossed, kept_whole): (Vec<usize>, Vec<usize>) = straddling
+        .iter()
+        .copied()
         .filter(|&e| chosen[e])
         .filter(|&e| {
             let nodes = &mesh.elements[e].nodes;
@@ -246,7 +256,9 @@ fn split(
         on_crossed_edge[b as usize] = true;
     }
     let mut new_on_edges = Vec::new();
-    for f in 0..mesh.faces.len() {
+    // (a face on a crossed edge is a face of an element holding that edge,
+    // which straddles the plane)
+    for f in nearby_faces.iter().map(|&f| f as usize) {
         let v = &mesh.faces[f].vertices;
         if changed[f] || v.iter().filter(|&&x| on_crossed_edge[x as usize]).count() < 2 {
             continue;
@@ -263,7 +275,7 @@ fn split(
             changed[f] = true;
         }
     }
-    for e in 0..mesh.elements.len() {
+    for &e in &straddling {
         if is_crossed[e] {
             continue;
         }
