@@ -469,7 +469,7 @@ impl Simulation {
         cut: impl FnOnce(&mut PolyMesh) -> Result<PolygonCutReport, Error>,
     ) -> Result<PolygonCutReport, Error> {
         let t = std::time::Instant::now();
-        let rebuild = |t: &PhaseTimings| t.basis + t.assembly;
+        let rebuild = |t: &PhaseTimings| t.basis + t.assembly + t.solve;
         let before = rebuild(&self.timings);
         let rollback = Rollback::around_plane(&self.mesh, plane, &SplitOptions::default());
         let result = cut(&mut self.mesh).and_then(|report| {
@@ -479,7 +479,15 @@ impl Simulation {
         if result.is_err() {
             rollback.restore(&mut self.mesh);
         }
-        // the rebuild of element data and pattern is booked under its phases
+        // the new pattern's analysis (Cholesky ordering and symbolic
+        // factorisation, or the block structure of CG) makes the system
+        // ready; the cut itself stands even if that fails
+        let result = result.and_then(|report| {
+            self.ensure_analysed()?;
+            Ok(report)
+        });
+        // rebuilding element data and pattern, and the analysis, are booked
+        // under their own phases
         let topology = t.elapsed().as_secs_f64() - (rebuild(&self.timings) - before);
         self.timings.add(Phase::Topology, topology);
         result
