@@ -99,8 +99,8 @@ proptest! {
     /// Random convex polyhedra (a box clipped by random planes). Elements
     /// with almost coincident nodes (an edge below 5 % of the diameter) are
     /// skipped: MFS cannot tell such nodes apart (martin2008 §5 merges them
-    /// into one joint function); cut snapping and sliver merging keep them
-    /// out of simulation meshes.
+    /// into one joint function); cuts make them rare (they snap nodes onto
+    /// the plane and leave no part flatter than `SplitOptions::min_quality`).
     #[test]
     fn convex_elements_reproduce_linear_fields(seed in 0u64..1_000_000, planes in 1usize..6) {
         let mesh = clipped_box([0.0; 3], [1.0, 0.8, 1.2], planes, seed).unwrap();

@@ -1,5 +1,6 @@
-//! Topology changes of a [`crate::mesh::PolyMesh`]: plane splits (and, built
-//! on them, cuts, sliver merges and refinement).
+//! Topology changes of a [`crate::mesh::PolyMesh`]: plane splits that
+//! leave no slivers, cuts built on them (whole planes and progressive
+//! polygons), and the rollback of a cut that fails.
 
 mod cut;
 mod polygon;
