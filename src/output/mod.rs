@@ -87,6 +87,9 @@ pub struct MeshCounts {
     pub elements_by_vertex_count: BTreeMap<usize, usize>,
     /// Total volume (m^3).
     pub volume: f64,
+    /// The lowest element quality `6√2 V / d³` (1 for a regular
+    /// tetrahedron, towards 0 for slivers).
+    pub worst_quality: f64,
 }
 
 /// Everything `summary.json` holds.
@@ -133,6 +136,7 @@ impl MeshCounts {
             elements: mesh.elements.len(),
             elements_by_vertex_count: mesh.count_by_vertex_count(),
             volume: mesh.total_volume(),
+            worst_quality: (0..mesh.elements.len()).map(|e| mesh.element_quality(e)).fold(f64::INFINITY, f64::min),
         }
     }
 }

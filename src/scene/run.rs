@@ -11,6 +11,7 @@ use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{Collider, FixedRegion, Simulation, SimulationParams};
 use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
+use crate::topology::merge_slivers;
 use crate::topology::Plane;
 use crate::Error;
 
@@ -25,8 +26,17 @@ pub struct RunOptions {
 }
 
 impl LoadedScene {
-    /// Builds the scene's mesh (read or generated).
+    /// Builds the scene's mesh (read or generated), with its slivers merged
+    /// away when `mesh.merge_slivers` asks for it.
     pub fn build_mesh(&self) -> Result<PolyMesh, Error> {
+        let mut mesh = self.read_or_generate_mesh()?;
+        if let Some(q) = self.scene.mesh.merge_slivers {
+            merge_slivers(&mut mesh, q)?;
+        }
+        Ok(mesh)
+    }
+
+    fn read_or_generate_mesh(&self) -> Result<PolyMesh, Error> {
         let m = &self.scene.mesh;
         if let Some(file) = &m.file {
             return Ok(read_mesh(&self.resolve(file))?);

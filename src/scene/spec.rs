@@ -66,6 +66,9 @@ pub struct MeshSpec {
     pub outline: Option<Vec<[f64; 2]>>,
     /// Height of a `prism` along z (m).
     pub height: Option<f64>,
+    /// Merge tetrahedra of quality `6√2 V / d³` below this away before the
+    /// run (wicke2007 §4; see `topology::merge_slivers`), in (0, 1).
+    pub merge_slivers: Option<f64>,
 }
 
 /// Mesh generators.
@@ -468,6 +471,11 @@ impl Scene {
                 }
             }
             (Some(_), None) => {}
+        }
+        if let Some(q) = m.merge_slivers {
+            if !(q > 0.0 && q < 1.0) {
+                return Err(s.invalid("mesh.merge_slivers", q, "a quality threshold in (0, 1), e.g. 0.02"));
+            }
         }
         if self.meshing.is_some() {
             return Err(s.unsupported("meshing", "meshing surfaces into elements is not implemented yet"));

@@ -5,9 +5,11 @@
 mod cut;
 mod polygon;
 mod rollback;
+mod sliver;
 mod split;
 
 pub use cut::{cut_by_plane, CutReport};
 pub use polygon::{cut_by_polygon, polygon_plane, PolygonCutReport};
 pub use rollback::Rollback;
+pub use sliver::{merge_slivers, SliverReport};
 pub use split::{split_by_plane, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};

@@ -30,6 +30,8 @@ pub struct Rollback {
     faces_saved: Vec<u32>,
     face_vertices: Flat<u32>,
     face_triangles: Flat<[u32; 3]>,
+    /// Saved node positions (for changes that move nodes).
+    positions: Vec<(u32, [f64; 3])>,
 }
 
 /// Lists of values, one after another.
@@ -73,6 +75,26 @@ impl Rollback {
                 el.nodes.iter().for_each(|&v| near[v as usize] = true);
             }
         }
+        Self::save(mesh, &near, Vec::new())
+    }
+
+    /// Saves what a change that moves `nodes` and rewires the elements
+    /// around them may change: their positions, the elements holding one of
+    /// them, and those elements' faces.
+    pub fn around_nodes(mesh: &PolyMesh, nodes: &[u32]) -> Self {
+        let mut near = vec![false; mesh.nodes.len()];
+        nodes.iter().for_each(|&v| near[v as usize] = true);
+        Self::save(mesh, &near, nodes.iter().map(|&v| (v, mesh.nodes[v as usize])).collect())
+    }
+
+    /// The ids of the saved elements, in increasing order.
+    pub fn elements(&self) -> &[u32] {
+        &self.elements_saved
+    }
+
+    /// Saves the elements holding a `near` node, their faces, and
+    /// `positions`.
+    fn save(mesh: &PolyMesh, near: &[bool], positions: Vec<(u32, [f64; 3])>) -> Self {
         let mut saved = Rollback {
             nodes: mesh.nodes.len(),
             faces: mesh.faces.len(),
@@ -83,6 +105,7 @@ impl Rollback {
             faces_saved: Vec::new(),
             face_vertices: Flat::new(),
             face_triangles: Flat::new(),
+            positions,
         };
         let mut face_saved = vec![false; mesh.faces.len()];
         for (e, el) in mesh.elements.iter().enumerate() {
@@ -116,6 +139,9 @@ impl Rollback {
     /// Puts `mesh` back as it was when this was saved.
     pub fn restore(self, mesh: &mut PolyMesh) {
         mesh.nodes.truncate(self.nodes);
+        for (v, x) in self.positions {
+            mesh.nodes[v as usize] = x;
+        }
         mesh.faces.truncate(self.faces);
         mesh.elements.truncate(self.elements);
         for (i, &f) in self.faces_saved.iter().enumerate() {
