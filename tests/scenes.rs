@@ -98,6 +98,15 @@ fn bad_input_ends_in_one_clear_error() {
     // harmonic fit parameters out of range, with the key
     let err = run_fails(d, &format!("{}[basis]\nfamily = \"harmonic\"\noffset = nan\n", scene_with_mesh("good.mesh")));
     assert!(err.contains("basis.offset") && err.contains("(0, 1]"), "{err}");
+    // a sliver threshold outside (0, 1), with the key and its line
+    let merge =
+        |q: &str| scene_with_mesh("good.mesh").replace("[material]", &format!("merge_slivers = {q}\n[material]"));
+    let err = run_fails(d, &merge("1.5"));
+    assert!(err.contains("mesh.merge_slivers") && err.contains("(0, 1)") && err.contains("scene.toml:3:"), "{err}");
+    let p = d.join("merge.toml");
+    std::fs::write(&p, merge("0.02")).unwrap();
+    let (ok, _, err) = cleave(&["run", p.to_str().unwrap(), "--out", d.join("m").to_str().unwrap()]);
+    assert!(ok, "a valid threshold runs: {err}");
     // an unconstrained body is singular
     let err = run_fails(
         d,
