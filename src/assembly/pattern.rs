@@ -50,6 +50,33 @@ pub struct SparsePattern {
     /// Offset of the diagonal block's first entry from the start of column
     /// `3 j`, per node.
     diagonal: Vec<u32>,
+    /// The previous topology's arrays, emptied: the next update writes into
+    /// them instead of fresh memory (a cut costs no page faults for the
+    /// large arrays, at the price of keeping them twice).
+    spare: Buffers,
+}
+
+/// The large arrays of a pattern, reused between updates.
+#[derive(Clone, Debug, Default)]
+struct Buffers {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    incidences: Vec<Incidence>,
+    slots: Vec<u32>,
+}
+
+impl Buffers {
+    /// Empty arrays with room for `entries`, `incidences` and `slots`.
+    fn with_room(mut self, entries: usize, incidences: usize, slots: usize) -> Self {
+        self.row_idx.clear();
+        self.row_idx.reserve(entries);
+        self.col_ptr.clear();
+        self.incidences.clear();
+        self.incidences.reserve(incidences);
+        self.slots.clear();
+        self.slots.reserve(slots);
+        self
+    }
 }
 
 /// A raw pointer to the values, shared by the node tasks of one assembly.
@@ -100,7 +127,8 @@ impl SparsePattern {
         }
         let incidences: usize = columns.iter().map(Vec::len).sum();
         let slots = columns.iter().flatten().map(|inc| inc.size as usize).sum();
-        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), [0, incidences, slots])
+        let buffers = Buffers::default().with_room(0, incidences, slots);
+        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), buffers)
     }
 
     /// Updates the pattern after the elements `changed` (mesh ids, sorted)
@@ -108,6 +136,7 @@ impl SparsePattern {
     /// are the nodes those elements had before. Only the columns of their
     /// nodes, old and new, are recomputed; the others are copied.
     pub fn update(&mut self, num_blocks: usize, store: &ElementStore, changed: &[u32], old_nodes: &[u32]) {
+        let spare = std::mem::take(&mut self.spare);
         let mut dirty = vec![false; num_blocks];
         old_nodes.iter().for_each(|&v| dirty[v as usize] = true);
         let mut added: Vec<(u32, Incidence)> = Vec::new();
@@ -142,8 +171,11 @@ impl SparsePattern {
         }
         // room for what a cut adds, so the arrays are not regrown
         let room = |n: usize| n + n / 8;
-        let capacity = [room(self.nnz()), room(self.incidences.len()), room(self.slots.len())];
-        *self = Self::lay_out(store, columns, capacity);
+        let buffers = spare.with_room(room(self.nnz()), room(self.incidences.len()), room(self.slots.len()));
+        let new = Self::lay_out(store, columns, buffers);
+        let old = std::mem::replace(self, new);
+        let (_, _, col_ptr, _, row_idx) = old.symbolic.into_parts();
+        self.spare = Buffers { col_ptr, row_idx, incidences: old.incidences, slots: old.slots };
     }
 
     /// The incidences of node `j` (none for a node past the pattern).
@@ -154,10 +186,9 @@ impl SparsePattern {
         }
     }
 
-    /// Lays out the compressed columns of `columns`, copying the rows and
-    /// slots of kept columns; `capacity` is the expected number of entries,
-    /// incidences and slots.
-    fn lay_out(store: &ElementStore, columns: Vec<Column>, capacity: [usize; 3]) -> Self {
+    /// Lays out the compressed columns of `columns` into `buffers`, copying
+    /// the rows and slots of kept columns.
+    fn lay_out(store: &ElementStore, columns: Vec<Column>, buffers: Buffers) -> Self {
         let num_blocks = columns.len();
         // block rows of every recomputed column: union of its elements' nodes
         let rows: Vec<Vec<u32>> = columns
@@ -180,13 +211,11 @@ impl SparsePattern {
             })
             .collect();
         let n = 3 * num_blocks;
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::with_capacity(capacity[0]);
+        let Buffers { mut col_ptr, mut row_idx, mut incidences, mut slots } = buffers;
+        col_ptr.reserve(n + 1);
         let mut col_stride = Vec::with_capacity(num_blocks);
         let mut diagonal = Vec::with_capacity(num_blocks);
         let mut offsets = Vec::with_capacity(num_blocks + 1);
-        let mut incidences = Vec::with_capacity(capacity[1]);
-        let mut slots = Vec::with_capacity(capacity[2]);
         col_ptr.push(0usize);
         offsets.push(0u32);
         for (j, col) in columns.into_iter().enumerate() {
@@ -229,7 +258,16 @@ impl SparsePattern {
             offsets.push(u32::try_from(incidences.len()).expect("fewer than 2^32 incidences"));
         }
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        SparsePattern { num_blocks, symbolic, col_stride, offsets, incidences, slots, diagonal }
+        SparsePattern {
+            num_blocks,
+            symbolic,
+            col_stride,
+            offsets,
+            incidences,
+            slots,
+            diagonal,
+            spare: Buffers::default(),
+        }
     }
 
     /// Number of stored scalar entries.

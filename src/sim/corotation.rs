@@ -44,6 +44,12 @@ pub struct Corotation {
     batches: Vec<BatchState>,
 }
 
+/// `v` as `n` copies of `value`, in the memory it already has.
+fn refill<T: Copy>(v: &mut Vec<T>, n: usize, value: T) {
+    v.clear();
+    v.resize(n, value);
+}
+
 #[inline]
 fn mat_vec(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
     [
@@ -65,19 +71,25 @@ fn mat_t_vec(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
 impl Corotation {
     /// Identity rotations for every element of `store`.
     pub fn new(store: &ElementStore) -> Self {
+        let mut corotation = Corotation::default();
+        corotation.reset(store);
+        corotation
+    }
+
+    /// Identity rotations for every element of `store` after its elements
+    /// changed, reusing the arrays this already holds.
+    pub fn reset(&mut self, store: &ElementStore) {
         let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-        Corotation {
-            batches: store
-                .batches
-                .iter()
-                .map(|b| BatchState {
-                    quaternion: vec![[1.0, 0.0, 0.0, 0.0]; b.len()],
-                    rotation: vec![identity; b.len()],
-                    gradient: vec![identity; b.len()],
-                    force: vec![[0.0; 3]; b.len() * b.k],
-                    rotated_grads: if b.is_tet() { b.stress_grads.clone() } else { Vec::new() },
-                })
-                .collect(),
+        self.batches.resize_with(store.batches.len(), BatchState::default);
+        for (b, st) in store.batches.iter().zip(&mut self.batches) {
+            refill(&mut st.quaternion, b.len(), [1.0, 0.0, 0.0, 0.0]);
+            refill(&mut st.rotation, b.len(), identity);
+            refill(&mut st.gradient, b.len(), identity);
+            refill(&mut st.force, b.len() * b.k, [0.0; 3]);
+            st.rotated_grads.clear();
+            if b.is_tet() {
+                st.rotated_grads.extend_from_slice(&b.stress_grads);
+            }
         }
     }
 

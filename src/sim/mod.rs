@@ -558,7 +558,7 @@ impl Simulation {
     fn refresh_topology(&mut self) {
         let n = self.mesh.nodes.len();
         self.masses = self.store.lumped_masses(n, self.params.material.density);
-        self.corotation = Corotation::new(&self.store);
+        self.corotation.reset(&self.store);
         self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
         self.analysed = false;
         self.referenced = false;
