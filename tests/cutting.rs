@@ -2,7 +2,7 @@
 //! sequences, separation of the pieces, and long runs after cuts.
 
 use cleave::mesh::{face_geometry, PolyMesh, ValidationOptions};
-use cleave::meshing::{box_hex, box_tet, random_convex};
+use cleave::meshing::{box_hex, box_tet};
 use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::topology::{cut_by_plane, Plane, SplitOptions};
 use proptest::prelude::*;
@@ -118,11 +118,7 @@ proptest! {
 
     #[test]
     fn random_cut_sequences_keep_the_mesh_valid(seed in 0u64..10_000, planes in prop::collection::vec(common::plane_strategy(0.1, 0.9), 1..4)) {
-        let mut mesh = if seed % 2 == 0 {
-            random_convex([0.0; 3], [1.0; 3], 5, seed).unwrap()
-        } else {
-            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
-        };
+        let mut mesh = common::cube_of_polyhedra_or_tets(seed, 5);
         for plane in planes {
             mesh = cut_and_check(mesh, plane);
         }
@@ -314,11 +310,7 @@ proptest! {
         half in (0.1f64..0.6, 0.1f64..0.6),
         twist in 0.0f64..1.5,
     ) {
-        let mut mesh = if seed % 2 == 0 {
-            random_convex([0.0; 3], [1.0; 3], 5, seed).unwrap()
-        } else {
-            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
-        };
+        let mut mesh = common::cube_of_polyhedra_or_tets(seed, 5);
         let polygon = common::rectangle_in_plane(&plane, half, twist);
         polygon_cut_and_check(&mut mesh, &polygon);
     }

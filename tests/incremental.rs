@@ -8,7 +8,7 @@ use cleave::assembly::SparsePattern;
 use cleave::material::Material;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_l_prisms;
-use cleave::meshing::{box_tet, random_convex};
+use cleave::meshing::box_tet;
 use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::Family;
 use cleave::store::{BasisOptions, ElementStore};
@@ -94,11 +94,7 @@ proptest! {
         seed in 0u64..10_000,
         planes in prop::collection::vec(common::plane_strategy(0.1, 0.9), 1..4),
     ) {
-        let mesh = if seed % 2 == 0 {
-            random_convex([0.0; 3], [1.0; 3], 6, seed).unwrap()
-        } else {
-            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
-        };
+        let mesh = common::cube_of_polyhedra_or_tets(seed, 6);
         let mut system = System::new(mesh);
         for (i, plane) in planes.iter().enumerate() {
             if i % 2 == 0 {
@@ -149,11 +145,7 @@ proptest! {
         polygon in any::<bool>(),
         half in (0.1f64..0.6, 0.1f64..0.6),
     ) {
-        let before = if seed % 2 == 0 {
-            random_convex([0.0; 3], [1.0; 3], 6, seed).unwrap()
-        } else {
-            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
-        };
+        let before = common::cube_of_polyhedra_or_tets(seed, 6);
         let mut mesh = before.clone();
         let corners = common::rectangle_in_plane(&plane, half, 0.3);
         let cut_plane = if polygon { polygon_plane(&corners).unwrap() } else { plane };

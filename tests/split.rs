@@ -79,11 +79,7 @@ proptest! {
         centre in (0.2f64..0.8, 0.2f64..0.8, 0.2f64..0.8),
         radius in 0.1f64..0.5,
     ) {
-        let mut mesh = if seed % 2 == 0 {
-            random_convex([0.0; 3], [1.0; 3], 7, seed).unwrap()
-        } else {
-            box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
-        };
+        let mut mesh = common::cube_of_polyhedra_or_tets(seed, 7);
         let chosen: Vec<u32> = (0..mesh.elements.len() as u32)
             .filter(|&e| {
                 let c = mesh.element_centroid(e as usize);

@@ -59,6 +59,17 @@ pub fn plane_strategy(lo: f64, hi: f64) -> impl Strategy<Value = Plane> {
         .prop_map(|(x, y, z, a, b, c)| Plane { point: [x, y, z], normal: [a, b, c] })
 }
 
+/// The unit cube as polyhedra or tetrahedra, by the parity of `seed`: cut
+/// by `planes` random planes from `seed` (even), or a 3x3x3 box of
+/// tetrahedra (odd).
+pub fn cube_of_polyhedra_or_tets(seed: u64, planes: usize) -> PolyMesh {
+    if seed % 2 == 0 {
+        cleave::meshing::random_convex([0.0; 3], [1.0; 3], planes, seed).unwrap()
+    } else {
+        box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()
+    }
+}
+
 /// The rectangle of half sides `half` centred on `plane.point` in the
 /// plane, turned by `twist` (radians) about its normal, counter-clockwise
 /// about the normal.
