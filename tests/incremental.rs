@@ -38,12 +38,7 @@ impl System {
     /// Applies `cut` to the mesh and updates store and pattern in place.
     fn cut(&mut self, cut: impl FnOnce(&mut PolyMesh) -> CutReport) {
         let report = cut(&mut self.mesh);
-        let old_nodes: Vec<u32> = report
-            .touched
-            .iter()
-            .filter_map(|&e| self.store.locate.get(e as usize))
-            .flat_map(|&(b, i)| self.store.batches[b as usize].element_nodes(i as usize).to_vec())
-            .collect();
+        let old_nodes = self.store.nodes_of(&report.touched);
         self.store.update(&self.mesh, &material(), &BasisOptions::default(), &report.touched).unwrap();
         self.pattern.update(self.mesh.nodes.len(), &self.store, &report.touched, &old_nodes);
     }

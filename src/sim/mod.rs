@@ -496,7 +496,8 @@ impl Simulation {
     /// Checks the touched elements of a cut mesh, carries the state over to
     /// the new nodes (in the order they were made: edge nodes, the pocket
     /// node, then the duplicates), rebuilds the touched elements' data and
-    /// the pattern's columns of their nodes, and installs the mesh.
+    /// the pattern's columns of their nodes, and brings masses, rotations
+    /// and solver up to date.
     fn apply_cut(&mut self, report: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<(), Error> {
         let mesh = &self.mesh;
         // only the touched elements changed (the two sides of a cut carry
@@ -532,12 +533,7 @@ impl Simulation {
             return Err(Error::Parameter(message));
         }
         // the touched elements' nodes before the cut, then their new data
-        let old_nodes: Vec<u32> = report
-            .touched
-            .iter()
-            .filter_map(|&e| self.store.locate.get(e as usize))
-            .flat_map(|&(b, i)| self.store.batches[b as usize].element_nodes(i as usize).iter().copied())
-            .collect();
+        let old_nodes = self.store.nodes_of(&report.touched);
         let t = std::time::Instant::now();
         self.store.update(mesh, &self.params.material, &self.params.basis, &report.touched)?;
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());

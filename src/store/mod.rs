@@ -347,6 +347,17 @@ impl ElementStore {
         Ok(())
     }
 
+    /// The nodes of the listed elements (mesh ids; unknown ones are
+    /// skipped), as the store holds them: before an [`ElementStore::update`]
+    /// these are the nodes the elements had before the change.
+    pub fn nodes_of(&self, elements: &[u32]) -> Vec<u32> {
+        elements
+            .iter()
+            .filter_map(|&e| self.locate.get(e as usize))
+            .flat_map(|&(b, i)| self.batches[b as usize].element_nodes(i as usize).iter().copied())
+            .collect()
+    }
+
     /// The store of the listed elements only (`locate` covers the whole
     /// mesh; unlisted elements are located nowhere).
     fn build_elements(

@@ -161,12 +161,12 @@ pub fn cut_by_polygon(
     let split = split_elements_by_plane(mesh, &plane, &chosen, opts)?;
     let mut new_nodes = split.new_nodes.clone();
 
-    // 2. the faces in the plane and who uses them; an element kept whole
-    // (a part would have been a sliver) is cut around: its faces towards
-    // the other side take the place of the cap it did not get
-    // everything below happens in the region of the elements near the
-    // plane or the elements it crossed (every face in the plane, around a
-    // face in it or of a crossed element is one of theirs)
+    // 2. the faces in the plane and who uses them, all within the region of
+    // the elements near the plane or the elements it crossed (every face in
+    // the plane, around a face in it or of a crossed element is one of
+    // theirs); an element kept whole (a part would have been a sliver) is
+    // cut around: its faces towards the other side take the place of the
+    // cap it did not get
     let band = snap_band(mesh, opts);
     let region = cut_region(mesh, &plane, band, &split);
     let mut region_faces: Vec<u32> =
