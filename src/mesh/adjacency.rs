@@ -11,7 +11,7 @@ pub const NONE: u32 = u32::MAX;
 /// Adjacency tables of a [`PolyMesh`], built in one pass.
 #[derive(Clone, Debug)]
 pub struct Adjacency {
-    /// For each face, the (up to two) elements it bounds; [`NONE`] pads.
+    /// For each face, the (up to two) elements it bounds; `NONE` pads.
     pub face_elements: Vec<[u32; 2]>,
     /// CSR offsets into `node_element_ids`, one row per node.
     pub node_element_offsets: Vec<u32>,

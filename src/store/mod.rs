@@ -7,11 +7,11 @@
 //! gradients at the element's stress point (`k`). Kernels run over a batch
 //! as over plain slices; a batch is rebuilt alone when its elements change.
 //!
-//! Tetrahedra form the `k = 4` batch and use the closed form ([`tet`]). The
+//! Tetrahedra form the `k = 4` batch and use the closed form (`tet`). The
 //! other elements use the scene's family: mean value shape functions on
-//! convex elements ([`mean_value`]), or harmonic ones on any planar-faced
+//! convex elements (`mean_value`), or harmonic ones on any planar-faced
 //! element ([`harmonic`]), where hexahedra keep the closed-form trilinear
-//! basis ([`trilinear`]).
+//! basis (`trilinear`).
 
 pub mod harmonic;
 mod mean_value;
