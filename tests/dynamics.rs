@@ -7,6 +7,7 @@ use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_tet, random_convex};
 use cleave::sim::{Collider, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
+use cleave::topology::Plane;
 
 fn rotate(axis: usize, angle: f64, p: [f64; 3]) -> [f64; 3] {
     let (s, c) = angle.sin_cos();
@@ -157,7 +158,17 @@ fn trajectories_are_bitwise_independent_of_the_thread_count() {
                 let mesh = random_convex([0.0, 0.0, 0.2], [1.0, 1.0, 1.2], 6, 3).unwrap();
                 let mut sim = Simulation::new(mesh, SimulationParams { solver, ..params(true) }).unwrap();
                 sim.add_collider(Collider::new([0.0; 3], [0.1, 0.0, 1.0], 1e6).unwrap());
-                for _ in 0..100 {
+                for step in 0..100 {
+                    // cuts rebuild part of the system in place: that too
+                    // must not depend on the threads
+                    if step == 40 {
+                        let cut = sim.cut_plane(&Plane { point: [0.5, 0.5, 0.7], normal: [1.0, 0.2, 0.1] }).unwrap();
+                        assert!(!cut.split.split_elements.is_empty());
+                    }
+                    if step == 60 {
+                        let blade = [[0.2, 0.3, -0.1], [0.2, 0.3, 0.9], [0.2, 0.9, 0.9], [0.2, 0.9, -0.1]];
+                        assert!(!sim.cut_polygon(&blade).unwrap().cut.touched.is_empty());
+                    }
                     sim.step().unwrap();
                 }
                 sim.displacements().iter().flatten().map(|v| v.to_bits()).collect::<Vec<u64>>()
