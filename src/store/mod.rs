@@ -124,37 +124,40 @@ impl Batch {
         &self.nodes[i * self.k..(i + 1) * self.k]
     }
 
-    /// The per-element arrays (each holds the same number of values per
-    /// element, possibly none).
-    fn arrays_mut(&mut self) -> [&mut dyn ChunkVec; 10] {
-        [
-            &mut self.elements,
-            &mut self.nodes,
-            &mut self.rest,
-            &mut self.volume,
-            &mut self.mass_fraction,
-            &mut self.stiffness,
-            &mut self.stress_grads,
-            &mut self.triangles,
-            &mut self.points,
-            &mut self.weights,
-        ]
-    }
-
-    /// Removes entry `i`; the last entry takes its place.
+    /// Removes entry `i`; the last entry takes its place in every
+    /// per-element array (each holds the same number of values per element,
+    /// possibly none).
     fn swap_remove(&mut self, i: usize) {
-        let n = self.len();
-        for array in self.arrays_mut() {
-            let per = array.len() / n;
-            array.move_chunk(n - 1, i, per);
+        fn take_last<T: Copy>(v: &mut Vec<T>, i: usize, n: usize) {
+            let per = v.len() / n;
+            v.copy_within((n - 1) * per.., i * per);
+            v.truncate((n - 1) * per);
         }
+        let n = self.len();
+        take_last(&mut self.elements, i, n);
+        take_last(&mut self.nodes, i, n);
+        take_last(&mut self.rest, i, n);
+        take_last(&mut self.volume, i, n);
+        take_last(&mut self.mass_fraction, i, n);
+        take_last(&mut self.stiffness, i, n);
+        take_last(&mut self.stress_grads, i, n);
+        take_last(&mut self.triangles, i, n);
+        take_last(&mut self.points, i, n);
+        take_last(&mut self.weights, i, n);
     }
 
     /// Appends the entries of `other` (same kind, `k` and quadrature size).
     fn append(&mut self, mut other: Batch) {
-        for (array, from) in self.arrays_mut().into_iter().zip(other.arrays_mut()) {
-            array.append_from(from);
-        }
+        self.elements.append(&mut other.elements);
+        self.nodes.append(&mut other.nodes);
+        self.rest.append(&mut other.rest);
+        self.volume.append(&mut other.volume);
+        self.mass_fraction.append(&mut other.mass_fraction);
+        self.stiffness.append(&mut other.stiffness);
+        self.stress_grads.append(&mut other.stress_grads);
+        self.triangles.append(&mut other.triangles);
+        self.points.append(&mut other.points);
+        self.weights.append(&mut other.weights);
     }
 
     /// A batch of the same kind, `k`, material and quadrature with no entries.
@@ -226,39 +229,6 @@ impl Batch {
             }
             *o = f;
         }
-    }
-}
-
-/// A per-element array of a batch, seen as chunks of fixed size.
-trait ChunkVec {
-    /// Number of values.
-    fn len(&self) -> usize;
-    /// Copies chunk `from` (the last) over chunk `to` and drops chunk `from`.
-    fn move_chunk(&mut self, from: usize, to: usize, per: usize);
-    /// Moves every value of `other` (the same type) to the end of `self`.
-    fn append_from(&mut self, other: &mut dyn ChunkVec);
-    /// `self` as `Any`, to recover the concrete type in `append_from`.
-    fn as_any(&mut self) -> &mut dyn std::any::Any;
-}
-
-impl<T: Copy + 'static> ChunkVec for Vec<T> {
-    fn len(&self) -> usize {
-        Vec::len(self)
-    }
-
-    fn move_chunk(&mut self, from: usize, to: usize, per: usize) {
-        self.copy_within(from * per..(from + 1) * per, to * per);
-        self.truncate(from * per);
-    }
-
-    fn append_from(&mut self, other: &mut dyn ChunkVec) {
-        if let Some(other) = other.as_any().downcast_mut::<Vec<T>>() {
-            self.append(other);
-        }
-    }
-
-    fn as_any(&mut self) -> &mut dyn std::any::Any {
-        self
     }
 }
 
