@@ -9,13 +9,6 @@ use proptest::prelude::*;
 
 mod common;
 
-/// Signed distance of `x` from `plane` (normal not normalised).
-fn distance(plane: &Plane, x: [f64; 3]) -> f64 {
-    let n = plane.normal;
-    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    (0..3).map(|i| (x[i] - plane.point[i]) * n[i]).sum::<f64>() / len
-}
-
 /// No sliver anywhere: split parts have at least `min_quality` (up to the
 /// snapping, which leaves a cap corner up to 1e-4 of an edge off the plane,
 /// against parts at least 0.5 % of their element thick).
@@ -58,7 +51,7 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     // across it (an element is on the side of its vertex farthest from it)
     let side: Vec<f64> = (0..mesh.elements.len())
         .map(|e| {
-            let d = mesh.elements[e].nodes.iter().map(|&v| distance(&plane, mesh.nodes[v as usize]));
+            let d = mesh.elements[e].nodes.iter().map(|&v| plane.distance(mesh.nodes[v as usize]));
             d.fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m }).signum()
         })
         .collect();
@@ -67,7 +60,7 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
         let (lo, hi) = mesh.elements[e]
             .nodes
             .iter()
-            .map(|&v| distance(&plane, mesh.nodes[v as usize]))
+            .map(|&v| plane.distance(mesh.nodes[v as usize]))
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
         let crossed = lo < -snap && hi > snap;
         assert!(!crossed || kept_whole(e), "element {e} straddles the plane");
@@ -90,7 +83,7 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
         assert_eq!(mesh.nodes[a as usize], mesh.nodes[b as usize]);
         let around =
             report.split.kept_whole.iter().any(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| v == a || v == b));
-        assert!(around || distance(&plane, mesh.nodes[a as usize]).abs() <= snap * h, "duplicated node off the plane");
+        assert!(around || plane.distance(mesh.nodes[a as usize]).abs() <= snap * h, "duplicated node off the plane");
     }
     // the section: boundary faces that come in twins (the two sides of a
     // face the cut opened: the same nodes up to duplication)

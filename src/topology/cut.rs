@@ -9,8 +9,6 @@
 //! sides shared become two boundary faces and the body opens there.
 //! Positions are in the mesh's rest (material) frame.
 
-use cleave_kernels::vec3::{dot, norm, sub};
-
 use super::split::{snap_band, split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
 use crate::mesh::{Face, PolyMesh};
 
@@ -32,9 +30,7 @@ pub struct CutReport {
 /// element holding a node that elements on both sides use is among them:
 /// such a node lies in the band, or on an element the plane crossed.
 pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, band: f64, split: &SplitReport) -> Vec<u32> {
-    let len = norm(plane.normal);
-    let mut marked: Vec<bool> =
-        mesh.nodes.iter().map(|&x| (dot(sub(x, plane.point), plane.normal) / len).abs() <= band).collect();
+    let mut marked: Vec<bool> = plane.distances(&mesh.nodes).iter().map(|d| d.abs() <= band).collect();
     let crossed = split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.kept_whole.iter().copied());
     for e in crossed {
         mesh.elements[e as usize].nodes.iter().for_each(|&v| marked[v as usize] = true);
@@ -49,7 +45,7 @@ pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, band: f64, split: &Spli
 /// farthest from the plane (after a split no element straddles it but
 /// those kept whole, which go with their larger part).
 pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32]) -> Vec<i8> {
-    let dist = |v: u32| dot(sub(mesh.nodes[v as usize], plane.point), plane.normal);
+    let dist = |v: u32| plane.distance(mesh.nodes[v as usize]);
     let mut side = vec![0; mesh.elements.len()];
     for &e in region {
         let nodes = &mesh.elements[e as usize].nodes;

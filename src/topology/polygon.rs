@@ -126,10 +126,10 @@ pub fn cut_by_polygon(
             return Err(SplitError::InvalidPolygon("is not convex".into()));
         }
     }
-    let dist = |x: [f64; 3]| dot(sub(x, centroid), normal);
+    let dist = |x: [f64; 3]| plane.distance(x);
 
     // 1. split the crossed elements whose section overlaps the polygon
-    let node_dist: Vec<f64> = mesh.nodes.iter().map(|&x| dist(x)).collect();
+    let node_dist = plane.distances(&mesh.nodes);
     let chosen: Vec<u32> = (0..mesh.elements.len())
         .filter(|&e| {
             let el = &mesh.elements[e];

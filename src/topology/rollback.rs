@@ -3,14 +3,12 @@
 //! A cut only appends nodes, faces and elements, and rewrites elements (and
 //! their faces) that share a node with an element reaching into the band
 //! `|distance| <= band` around the cut's plane (`band` being the largest
-//! snapping distance of the split, [`super::split::snap_band`]): splits change the crossed
-//! elements and the faces around crossed edges, separation renames nodes on
-//! (or, around elements kept whole, next to) the plane, and polygon cuts
-//! split faces in the plane. [`Rollback::around_plane`] saves exactly those
+//! snapping distance of the split, `split::snap_band`): splits change the
+//! crossed elements and the faces around crossed edges, separation renames
+//! nodes on (or, around elements kept whole, next to) the plane, and
+//! polygon cuts split faces in the plane. [`Rollback::around_plane`] saves exactly those
 //! elements and faces, so a cut that fails half-way can be undone in time
 //! proportional to the region it touched.
-
-use cleave_kernels::vec3::{dot, norm, sub};
 
 use super::split::{snap_band, Plane, SplitOptions};
 use crate::mesh::{Element, Face, FaceRef, PolyMesh};
@@ -63,8 +61,7 @@ impl Rollback {
     /// of the plane, and their faces.
     pub fn around_plane(mesh: &PolyMesh, plane: &Plane, opts: &SplitOptions) -> Self {
         let band = snap_band(mesh, opts);
-        let len = norm(plane.normal);
-        let dist: Vec<f64> = mesh.nodes.iter().map(|&x| dot(sub(x, plane.point), plane.normal) / len).collect();
+        let dist = plane.distances(&mesh.nodes);
         let mut near = vec![false; mesh.nodes.len()];
         for el in &mesh.elements {
             let (lo, hi) = el.nodes.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {

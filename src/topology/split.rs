@@ -36,6 +36,20 @@ pub struct Plane {
     pub normal: [f64; 3],
 }
 
+impl Plane {
+    /// Signed distance of `x` from the plane (m), positive on the normal's
+    /// side.
+    pub fn distance(&self, x: [f64; 3]) -> f64 {
+        dot(sub(x, self.point), self.normal) / norm(self.normal)
+    }
+
+    /// [`Plane::distance`] of every point.
+    pub fn distances(&self, points: &[[f64; 3]]) -> Vec<f64> {
+        let n = scale(self.normal, 1.0 / norm(self.normal));
+        points.iter().map(|&x| dot(sub(x, self.point), n)).collect()
+    }
+}
+
 /// Tolerances of a split.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SplitOptions {
@@ -132,7 +146,7 @@ fn split(
     // only elements with nodes strictly on both sides can be split or hold
     // an edge the plane crosses; a node of theirs closer to the plane than
     // `snap` times its shortest edge in them lies on it
-    let dist: Vec<f64> = mesh.nodes.iter().map(|p| dot(sub(*p, plane.point), n)).collect();
+    let dist = plane.distances(&mesh.nodes);
     let straddling: Vec<usize> = (0..mesh.elements.len())
         .filter(|&e| {
             let d = mesh.elements[e].nodes.iter().map(|&v| dist[v as usize]);
