@@ -32,6 +32,7 @@ use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
 use faer::{Mat, Side};
 
 use super::rollback::Rollback;
+use super::split::Plane;
 use crate::mesh::{face_geometry, Face, FaceRef, MeshError, PolyMesh, ValidationOptions};
 
 /// What [`merge_slivers`] did.
@@ -129,7 +130,8 @@ fn merge_one(mesh: &mut PolyMesh, e: usize, around: &[usize]) -> Result<(), &'st
         return Err("not a tetrahedron of four triangles");
     }
     let corners = mesh.elements[e].nodes.clone();
-    let (centre, normal) = sliver_plane(mesh, &corners)?;
+    let plane = sliver_plane(mesh, &corners)?;
+    let normal = plane.normal;
     // faces towards the normal and away from it, by their outward normals
     let (mut upper, mut lower) = (Vec::new(), Vec::new());
     for r in &refs {
@@ -147,7 +149,7 @@ fn merge_one(mesh: &mut PolyMesh, e: usize, around: &[usize]) -> Result<(), &'st
     };
     for &v in &corners {
         let x = mesh.nodes[v as usize];
-        mesh.nodes[v as usize] = sub(x, scale(normal, dot(sub(x, centre), normal)));
+        mesh.nodes[v as usize] = sub(x, scale(normal, plane.distance(x)));
     }
     match (upper.len(), lower.len()) {
         (2, 2) => merge_quadrilateral(mesh, normal, &upper, &lower, around, &across)?,
@@ -166,7 +168,7 @@ fn merge_one(mesh: &mut PolyMesh, e: usize, around: &[usize]) -> Result<(), &'st
 /// The least-squares plane of `corners`: their mean and the unit normal of
 /// least spread (the eigenvector of the smallest eigenvalue of their
 /// covariance).
-fn sliver_plane(mesh: &PolyMesh, corners: &[u32]) -> Result<([f64; 3], [f64; 3]), &'static str> {
+fn sliver_plane(mesh: &PolyMesh, corners: &[u32]) -> Result<Plane, &'static str> {
     let points: Vec<[f64; 3]> = corners.iter().map(|&v| mesh.nodes[v as usize]).collect();
     let centre = scale(points.iter().fold([0.0; 3], |m, &p| add(m, p)), 1.0 / points.len() as f64);
     let covariance =
@@ -178,7 +180,7 @@ fn sliver_plane(mesh: &PolyMesh, corners: &[u32]) -> Result<([f64; 3], [f64; 3])
     if !(len > 0.5) {
         return Err("no least-squares plane");
     }
-    Ok((centre, scale(normal, 1.0 / len)))
+    Ok(Plane { point: centre, normal: scale(normal, 1.0 / len) })
 }
 
 /// The two nodes the two faces share.
