@@ -22,5 +22,6 @@ pub mod lanes;
 pub mod mean_value;
 pub mod quadrature;
 pub mod rotation;
+pub mod spectrum;
 pub mod tet;
 pub mod vec3;
