@@ -41,34 +41,58 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     let opts = ValidationOptions { duplicate: 0.0, ..Default::default() };
     let problems = mesh.check(&opts, 5);
     assert!(problems.is_empty(), "{problems:?}");
+    // snapping bends a cap by at most `snap` of the element it crossed
     let snap = SplitOptions::default().snap;
     for e in 0..mesh.elements.len() {
         assert!(mesh.element_volume(e) > 0.0);
-        assert!(mesh.is_convex(e, snap), "element {e} is not convex");
+        let fold = mesh.non_convexity(e);
+        assert!(fold <= snap, "element {e} folds by {fold:.3e} of its diameter");
     }
     assert_no_sliver(&mesh);
-    // the plane crosses only elements kept whole, and no node is shared
-    // across it (an element is on the side of its vertex farthest from it)
+    // the plane crosses only elements kept whole: apart from the nodes the
+    // cut put on it (snapped, made or duplicated), every other element's
+    // nodes lie on one side; and no node is shared across it (an element
+    // is on the side of its vertex farthest from it)
+    let kept_whole = |e: usize| report.split.kept_whole.binary_search(&(e as u32)).is_ok();
+    // the nodes the split put on the plane (snapped or made), and their copies
+    let original: std::collections::HashMap<u32, u32> = report.duplicated.iter().map(|&(a, b)| (b, a)).collect();
+    let on_plane = |v: u32| {
+        let v = *original.get(&v).unwrap_or(&v);
+        report.split.on_plane.binary_search(&v).is_ok() || report.split.new_nodes.iter().any(|n| n.id == v)
+    };
+    // (an element whose nodes all lie on the plane may go with either side)
     let side: Vec<f64> = (0..mesh.elements.len())
         .map(|e| {
-            let d = mesh.elements[e].nodes.iter().map(|&v| plane.distance(mesh.nodes[v as usize]));
-            d.fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m }).signum()
+            let nodes = &mesh.elements[e].nodes;
+            let d = nodes.iter().filter(|&&v| !on_plane(v)).map(|&v| plane.distance(mesh.nodes[v as usize]));
+            let farthest = d.fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m });
+            if farthest == 0.0 {
+                0.0
+            } else {
+                farthest.signum()
+            }
         })
         .collect();
-    let kept_whole = |e: usize| report.split.kept_whole.binary_search(&(e as u32)).is_ok();
     for e in 0..mesh.elements.len() {
-        let (lo, hi) = mesh.elements[e]
+        let d: Vec<f64> = mesh.elements[e]
             .nodes
             .iter()
+            .filter(|&&v| !on_plane(v))
             .map(|&v| plane.distance(mesh.nodes[v as usize]))
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)));
-        let crossed = lo < -snap && hi > snap;
+            .collect();
+        let crossed = d.iter().any(|&x| x > 0.0) && d.iter().any(|&x| x < 0.0);
         assert!(!crossed || kept_whole(e), "element {e} straddles the plane");
     }
     let mut used = vec![0u8; mesh.nodes.len()];
     for (e, el) in mesh.elements.iter().enumerate() {
         for &v in &el.nodes {
-            used[v as usize] |= if side[e] > 0.0 { 1 } else { 2 };
+            used[v as usize] |= if side[e] > 0.0 {
+                1
+            } else if side[e] < 0.0 {
+                2
+            } else {
+                0
+            };
         }
     }
     assert!(used.iter().all(|&u| u != 3), "a node is still shared across the cut");
@@ -83,12 +107,12 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
         assert_eq!(mesh.nodes[a as usize], mesh.nodes[b as usize]);
         let around =
             report.split.kept_whole.iter().any(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| v == a || v == b));
-        assert!(around || plane.distance(mesh.nodes[a as usize]).abs() <= snap * h, "duplicated node off the plane");
+        let exact = plane.distance(mesh.nodes[a as usize]).abs() <= 1e-12 * h;
+        assert!(around || on_plane(a) || exact, "duplicated node off the plane");
     }
     // the section: boundary faces that come in twins (the two sides of a
     // face the cut opened: the same nodes up to duplication)
     let adj = mesh.adjacency();
-    let original: std::collections::HashMap<u32, u32> = report.duplicated.iter().map(|&(a, b)| (b, a)).collect();
     let mut twins: std::collections::HashMap<Vec<u32>, Vec<usize>> = Default::default();
     for f in (0..mesh.faces.len()).filter(|&f| adj.is_boundary_face(f)) {
         let mut key: Vec<u32> = mesh.faces[f].vertices.iter().map(|v| *original.get(v).unwrap_or(v)).collect();
@@ -227,8 +251,10 @@ fn polygon_cut_and_check(mesh: &mut PolyMesh, polygon: &[[f64; 3]]) -> cleave::t
             assert_eq!(loops(&before), loops(mesh), "untouched element {e} changed");
         }
     }
+    let snap = SplitOptions::default().snap;
     for e in 0..mesh.elements.len() {
-        assert!(mesh.is_convex(e, 1e-3), "element {e} is not convex");
+        let fold = mesh.non_convexity(e);
+        assert!(fold <= snap, "element {e} folds by {fold:.3e} of its diameter");
     }
     assert_no_sliver(mesh);
     // only nodes inside the polygon open: in its plane, or on an element the
@@ -337,21 +363,30 @@ fn a_swept_blade_cuts_progressively_while_the_body_moves() {
 
 #[test]
 fn a_cut_next_to_a_face_follows_the_face_instead_of_leaving_a_sliver() {
-    // x = 0.502 would leave a slab 0.4 % of the cell thick: the cell stays
-    // whole and the body opens along its face at x = 0.5
+    // x = 0.502 would leave a slab 0.4 % of the cell thick: the nodes of the
+    // face x = 0.5 snap onto the plane, nothing is split, and the body opens
+    // along that face
     let mesh = box_hex([0.0; 3], [1.0, 0.5, 0.5], [2, 1, 1]).unwrap();
     let plane = Plane { point: [0.502, 0.0, 0.0], normal: [1.0, 0.0, 0.0] };
     let mut cut = mesh.clone();
     let report = cut_by_plane(&mut cut, &plane, &SplitOptions::default()).unwrap();
-    assert_eq!(report.split.kept_whole, vec![1]);
     assert!(report.split.split_elements.is_empty() && report.split.new_nodes.is_empty());
+    assert_eq!(report.split.on_plane.len(), 4, "the face's nodes snap");
     assert_eq!(report.duplicated.len(), 4, "the four nodes of the face x = 0.5 open");
     let (_, components) = cut.adjacency().element_components(&cut);
     assert_eq!(components, 2);
     assert!((cut.total_volume() - mesh.total_volume()).abs() <= 1e-15);
-    // without the guard the same cut makes the sliver
+    // without snapping, the sliver guard keeps the cell whole and the cut
+    // follows its face all the same
+    let mut kept = mesh.clone();
+    let no_snap = SplitOptions { snap: 0.0, ..Default::default() };
+    let report = cut_by_plane(&mut kept, &plane, &no_snap).unwrap();
+    assert_eq!(report.split.kept_whole, vec![1]);
+    assert!(report.split.split_elements.is_empty() && report.split.new_nodes.is_empty());
+    assert_eq!(report.duplicated.len(), 4);
+    // without either, the same cut makes the sliver
     let mut sliced = mesh.clone();
-    let opts = SplitOptions { min_quality: 0.0, ..Default::default() };
+    let opts = SplitOptions { snap: 0.0, min_quality: 0.0, min_spacing: 0.0 };
     let report = cut_by_plane(&mut sliced, &plane, &opts).unwrap();
     assert_eq!(report.split.split_elements.len(), 1);
     let worst = (0..sliced.elements.len()).map(|e| sliced.element_quality(e)).fold(f64::INFINITY, f64::min);

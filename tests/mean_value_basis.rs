@@ -35,7 +35,7 @@ fn clipped_cube(dirs: &[(f64, f64, f64)]) -> Polyhedron {
         let n = [s * phi.cos(), s * phi.sin(), z];
         let point = add([0.5; 3], scale(n, r));
         // the positive side (kept as element 0) contains the centre
-        split_by_plane(&mut mesh, &Plane { point, normal: scale(n, -1.0) }, &SplitOptions::default()).unwrap();
+        split_by_plane(&mut mesh, &Plane { point, normal: scale(n, -1.0) }, &SplitOptions::exact()).unwrap();
     }
     polyhedron(&mesh, 0)
 }

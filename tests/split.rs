@@ -26,14 +26,22 @@ fn split_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
         assert!(mesh.element_volume(e) > 0.0);
         assert!(mesh.is_convex(e, SplitOptions::default().snap), "element {e} not convex");
     }
-    // the two parts of a split element lie on opposite sides of the plane
+    // the two parts of a split element lie on opposite sides of the plane:
+    // their nodes the split did not put on it (snapped or made) all lie on
+    // one side, and there is at least one
     let n = plane.normal;
-    let side = |e: u32| {
-        let c = mesh.element_centroid(e as usize);
-        (0..3).map(|i| (c[i] - plane.point[i]) * n[i]).sum::<f64>()
+    let off_plane = |e: u32| -> Vec<f64> {
+        mesh.elements[e as usize]
+            .nodes
+            .iter()
+            .filter(|&&v| (v as usize) < n0 && report.on_plane.binary_search(&v).is_err())
+            .map(|&v| plane.distance(mesh.nodes[v as usize]))
+            .collect()
     };
     for &(pos, neg) in &report.split_elements {
-        assert!(side(pos) > 0.0 && side(neg) < 0.0);
+        let (p, m) = (off_plane(pos), off_plane(neg));
+        assert!(!p.is_empty() && p.iter().all(|&d| d > 0.0), "positive part {pos}: {p:?}");
+        assert!(!m.is_empty() && m.iter().all(|&d| d < 0.0), "negative part {neg}: {m:?}");
     }
     // new nodes lie on the plane and strictly inside their edge
     for nn in &report.new_nodes {

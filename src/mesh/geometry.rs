@@ -55,6 +55,46 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
     FaceGeometry { normal, area: 0.5 * len, centroid, max_deviation, diameter: d2.sqrt() }
 }
 
+/// The depth (m) of the deepest fold of a closed surface given as planar
+/// face loops of `(key, position)` (a key names a point; two loops share
+/// an edge where they hold the same two keys next to each other). At an
+/// edge where faces `f` and `g` meet, the fold's depth is the smaller of
+/// how far `g`'s points lie outside `f`'s plane and how far `f`'s lie
+/// outside `g`'s; both are positive only at a reflex edge, and a closed
+/// surface without reflex edges bounds a convex body. The loops run
+/// counter-clockwise seen from outside. Negative for a strictly convex
+/// surface.
+pub fn fold_depth<K: Copy + Eq + std::hash::Hash + Ord>(loops: &[Vec<(K, [f64; 3])>]) -> f64 {
+    let planes: Vec<([f64; 3], [f64; 3])> = loops
+        .iter()
+        .map(|lp| {
+            let pts: Vec<[f64; 3]> = lp.iter().map(|p| p.1).collect();
+            let idx: Vec<u32> = (0..pts.len() as u32).collect();
+            let g = face_geometry(&pts, &idx);
+            (g.centroid, g.normal)
+        })
+        .collect();
+    let outside = |f: usize, g: usize| {
+        let (c, n) = planes[f];
+        loops[g].iter().map(|p| dot(sub(p.1, c), n)).fold(f64::NEG_INFINITY, f64::max)
+    };
+    let mut edges: std::collections::HashMap<(K, K), usize> = std::collections::HashMap::new();
+    let mut worst = f64::NEG_INFINITY;
+    for (k, lp) in loops.iter().enumerate() {
+        for i in 0..lp.len() {
+            let (a, b) = (lp[i].0, lp[(i + 1) % lp.len()].0);
+            let key = (a.min(b), a.max(b));
+            match edges.get(&key) {
+                Some(&other) => worst = worst.max(outside(k, other).min(outside(other, k))),
+                None => {
+                    edges.insert(key, k);
+                }
+            }
+        }
+    }
+    worst
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

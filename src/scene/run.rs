@@ -101,6 +101,7 @@ impl LoadedScene {
                         ..d
                     }
                 },
+                ..Default::default()
             },
             dt: sim_spec.dt,
             mass_damping: sim_spec.damping.mass,

@@ -18,7 +18,7 @@
 use cleave_kernels::rotation::{polar_rotations, rotation_matrix};
 use rayon::prelude::*;
 
-use crate::store::{Batch, ElementStore};
+use crate::store::{Batch, ElementStore, StoreChanges};
 
 /// Elements per parallel task of the per-element passes.
 const TASK: usize = 256;
@@ -36,6 +36,98 @@ struct BatchState {
     force: Vec<[f64; 3]>,
     /// Rotated shape function gradients `R g_a` (tetrahedra), `k` per element.
     rotated_grads: Vec<[f64; 3]>,
+}
+
+const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
+impl BatchState {
+    /// Removes entry `i` of a batch of `k`-node elements; the last entry
+    /// takes its place (as [`ElementStore::update`] does).
+    fn swap_remove(&mut self, i: usize, k: usize) {
+        fn take_last<T: Copy>(v: &mut Vec<T>, i: usize, per: usize) {
+            let n = v.len() / per.max(1);
+            if per == 0 || n == 0 {
+                return;
+            }
+            v.copy_within((n - 1) * per.., i * per);
+            v.truncate((n - 1) * per);
+        }
+        take_last(&mut self.quaternion, i, 1);
+        take_last(&mut self.rotation, i, 1);
+        take_last(&mut self.gradient, i, 1);
+        take_last(&mut self.force, i, k);
+        if !self.rotated_grads.is_empty() {
+            take_last(&mut self.rotated_grads, i, k);
+        }
+    }
+
+    /// Deformation gradients, rotations (if `warp`), forces and, for
+    /// tetrahedra, rotated gradients of the entries `range` of batch `b` at
+    /// positions `x` (m); returns the largest number of rotation iterations.
+    fn update_range(&mut self, b: &Batch, x: &[[f64; 3]], warp: bool, range: std::ops::Range<usize>) -> usize {
+        let k = b.k;
+        let first = range.start;
+        // 1. deformation gradients
+        self.gradient[range.clone()].par_iter_mut().with_min_len(TASK).enumerate().for_each(|(j, f)| {
+            let i = first + j;
+            let mut m = [0.0; 9];
+            for a in 0..k {
+                let (xa, g) = (x[b.nodes[i * k + a] as usize], b.stress_grads[i * k + a]);
+                for r in 0..3 {
+                    for c in 0..3 {
+                        m[3 * r + c] += xa[r] * g[c];
+                    }
+                }
+            }
+            *f = m;
+        });
+        // 2. rotations, SIMD over elements, warm-started
+        let mut most = 0;
+        if warp {
+            most = self.quaternion[range.clone()]
+                .par_chunks_mut(TASK)
+                .zip(self.gradient[range.clone()].par_chunks(TASK))
+                .map(|(q, f)| polar_rotations(f, q))
+                .max()
+                .unwrap_or(0);
+            self.rotation[range.clone()]
+                .par_iter_mut()
+                .zip(&self.quaternion[range.clone()])
+                .for_each(|(r, q)| *r = rotation_matrix(*q));
+        }
+        // 3. forces (and rotated gradients of tetrahedra)
+        let (rotation, gradient) = (&self.rotation, &self.gradient);
+        let forces = &mut self.force[first * k..range.end * k];
+        if b.is_tet() {
+            forces
+                .par_chunks_mut(k)
+                .zip(self.rotated_grads[first * k..range.end * k].par_chunks_mut(k))
+                .enumerate()
+                .with_min_len(TASK)
+                .for_each(|(j, (f, rg))| {
+                    let i = first + j;
+                    tet_forces(b, i, &rotation[i], &gradient[i], f, rg)
+                });
+        } else {
+            forces.par_chunks_mut(k).enumerate().with_min_len(TASK / 8).for_each(|(j, f)| {
+                let i = first + j;
+                let r = &rotation[i];
+                let u: Vec<[f64; 3]> = (0..k)
+                    .map(|a| {
+                        let (xa, xr) = (x[b.nodes[i * k + a] as usize], b.rest[i * k + a]);
+                        let l = mat_t_vec(r, xa);
+                        [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
+                    })
+                    .collect();
+                b.apply_stiffness(i, &u, f);
+                for fa in f.iter_mut() {
+                    let w = mat_vec(r, *fa);
+                    *fa = [-w[0], -w[1], -w[2]];
+                }
+            });
+        }
+        most
+    }
 }
 
 /// Rotations, forces and warped blocks of every element.
@@ -79,7 +171,7 @@ impl Corotation {
     /// Identity rotations for every element of `store` after its elements
     /// changed, reusing the arrays this already holds.
     pub fn reset(&mut self, store: &ElementStore) {
-        let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let identity = IDENTITY;
         self.batches.resize_with(store.batches.len(), BatchState::default);
         for (b, st) in store.batches.iter().zip(&mut self.batches) {
             refill(&mut st.quaternion, b.len(), [1.0, 0.0, 0.0, 0.0]);
@@ -99,60 +191,35 @@ impl Corotation {
     pub fn update(&mut self, store: &ElementStore, x: &[[f64; 3]], warp: bool) -> usize {
         let mut most = 0;
         for (b, st) in store.batches.iter().zip(&mut self.batches) {
-            let k = b.k;
-            // 1. deformation gradients
-            st.gradient.par_iter_mut().with_min_len(TASK).enumerate().for_each(|(i, f)| {
-                let mut m = [0.0; 9];
-                for a in 0..k {
-                    let (xa, g) = (x[b.nodes[i * k + a] as usize], b.stress_grads[i * k + a]);
-                    for r in 0..3 {
-                        for c in 0..3 {
-                            m[3 * r + c] += xa[r] * g[c];
-                        }
-                    }
-                }
-                *f = m;
-            });
-            // 2. rotations, SIMD over elements, warm-started
-            if warp {
-                most = most.max(
-                    st.quaternion
-                        .par_chunks_mut(TASK)
-                        .zip(st.gradient.par_chunks(TASK))
-                        .map(|(q, f)| polar_rotations(f, q))
-                        .max()
-                        .unwrap_or(0),
-                );
-                st.rotation.par_iter_mut().zip(&st.quaternion).for_each(|(r, q)| *r = rotation_matrix(*q));
-            }
-            // 3. forces (and rotated gradients of tetrahedra)
-            let (rotation, gradient) = (&st.rotation, &st.gradient);
-            if b.is_tet() {
-                st.force
-                    .par_chunks_mut(k)
-                    .zip(st.rotated_grads.par_chunks_mut(k))
-                    .enumerate()
-                    .with_min_len(TASK)
-                    .for_each(|(i, (f, rg))| tet_forces(b, i, &rotation[i], &gradient[i], f, rg));
-            } else {
-                st.force.par_chunks_mut(k).enumerate().with_min_len(TASK / 8).for_each(|(i, f)| {
-                    let r = &rotation[i];
-                    let u: Vec<[f64; 3]> = (0..k)
-                        .map(|a| {
-                            let (xa, xr) = (x[b.nodes[i * k + a] as usize], b.rest[i * k + a]);
-                            let l = mat_t_vec(r, xa);
-                            [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
-                        })
-                        .collect();
-                    b.apply_stiffness(i, &u, f);
-                    for fa in f.iter_mut() {
-                        let w = mat_vec(r, *fa);
-                        *fa = [-w[0], -w[1], -w[2]];
-                    }
-                });
-            }
+            most = most.max(st.update_range(b, x, warp, 0..b.len()));
         }
         most
+    }
+
+    /// Follows the moves of an [`ElementStore::update`]: untouched elements
+    /// keep their rotation (the warm start of the next polar decomposition)
+    /// wherever their entry moved, and the appended elements get theirs
+    /// from positions `x` (m), cold-started from the identity, with their
+    /// forces, so that energies and stresses read right after a topology
+    /// change are those of the current rotations.
+    pub fn apply_changes(&mut self, store: &ElementStore, changes: &StoreChanges, x: &[[f64; 3]], warp: bool) {
+        for &(b, i) in &changes.removed {
+            let (st, k) = (&mut self.batches[b as usize], store.batches[b as usize].k);
+            st.swap_remove(i as usize, k);
+        }
+        self.batches.resize_with(store.batches.len(), BatchState::default);
+        for &(b, start, count) in &changes.appended {
+            let (bt, st) = (&store.batches[b as usize], &mut self.batches[b as usize]);
+            let end = (start + count) as usize;
+            st.quaternion.resize(end, [1.0, 0.0, 0.0, 0.0]);
+            st.rotation.resize(end, IDENTITY);
+            st.gradient.resize(end, IDENTITY);
+            st.force.resize(end * bt.k, [0.0; 3]);
+            if bt.is_tet() {
+                st.rotated_grads.resize(end * bt.k, [0.0; 3]);
+            }
+            st.update_range(bt, x, warp, start as usize..end);
+        }
     }
 
     /// A rotation per node (row-major): the normalised sum of the

@@ -32,7 +32,8 @@ use crate::mesh::{PolyMesh, ValidationOptions};
 use crate::solve::{make_solver, solve_checked, LinearSolver, SolveStats, SolverKind};
 use crate::store::{BasisOptions, ElementStore};
 use crate::topology::{
-    cut_by_plane, cut_by_polygon, polygon_plane, CutReport, Plane, PolygonCutReport, Rollback, SplitOptions,
+    conserve_momentum, cut_by_plane, cut_by_polygon, momenta, polygon_plane, CutReport, NodeOrigins, Plane,
+    PolygonCutReport, Rollback, SplitOptions,
 };
 use crate::Error;
 
@@ -471,9 +472,10 @@ impl Simulation {
         let t = std::time::Instant::now();
         let rebuild = |t: &PhaseTimings| t.basis + t.assembly + t.solve;
         let before = rebuild(&self.timings);
-        let rollback = Rollback::around_plane(&self.mesh, plane, &SplitOptions::default());
+        let rollback = Rollback::around_plane(&self.mesh, plane);
+        let nodes_before = self.mesh.nodes.len();
         let result = cut(&mut self.mesh).and_then(|report| {
-            self.apply_cut(&report.cut, report.pocket.as_ref())?;
+            self.apply_cut(&report, nodes_before)?;
             Ok(report)
         });
         if result.is_err() {
@@ -493,75 +495,63 @@ impl Simulation {
         result
     }
 
-    /// Checks the touched elements of a cut mesh, carries the state over to
-    /// the new nodes (in the order they were made: edge nodes, the pocket
-    /// node, then the duplicates), rebuilds the touched elements' data and
-    /// the pattern's columns of their nodes, and brings masses, rotations
-    /// and solver up to date.
-    fn apply_cut(&mut self, report: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<(), Error> {
+    /// Checks the touched elements of a cut mesh and rebuilds their data
+    /// (the store checks their health), then carries the state over to the
+    /// new nodes ([`NodeOrigins`]), updates the pattern's columns of their
+    /// nodes and the masses, restores the momenta of the nodes whose masses
+    /// changed, and brings the rotations (untouched elements keep theirs,
+    /// new ones get theirs) and the solver up to date. Nothing but the mesh
+    /// has changed when it fails.
+    fn apply_cut(&mut self, report: &PolygonCutReport, nodes_before: usize) -> Result<(), Error> {
         let mesh = &self.mesh;
+        let touched = &report.cut.touched;
         // only the touched elements changed (the two sides of a cut carry
         // coincident nodes by design, which a whole-mesh check would flag)
-        let touched: Vec<usize> = report.touched.iter().map(|&e| e as usize).collect();
-        mesh.check_elements(&touched, &ValidationOptions::default())?;
-        let mut state = [self.displacement.clone(), self.velocity.clone(), self.previous_velocity.clone()];
-        // new nodes in the order they were made: every parent exists already
-        let mut made: Vec<(u32, Vec<(u32, f64)>)> =
-            report.split.new_nodes.iter().map(|nn| (nn.id, vec![(nn.a, 1.0 - nn.t), (nn.b, nn.t)])).collect();
-        if let Some((id, around)) = pocket {
-            made.push((*id, around.iter().map(|&v| (v, 1.0 / around.len() as f64)).collect()));
-        }
-        made.sort_by_key(|(id, _)| *id);
-        for s in &mut state {
-            for (id, weights) in &made {
-                if *id as usize != s.len() {
-                    return Err(Error::Parameter(format!("internal: new node {id} out of order after a cut")));
-                }
-                let value = weights.iter().fold([0.0; 3], |m, &(v, w)| {
-                    let x = s[v as usize];
-                    [m[0] + w * x[0], m[1] + w * x[1], m[2] + w * x[2]]
-                });
-                s.push(value);
-            }
-            for &(original, _) in &report.duplicated {
-                s.push(s[original as usize]);
-            }
-        }
-        if state[0].len() != mesh.nodes.len() {
-            let message =
-                format!("internal: {} node states for {} nodes after a cut", state[0].len(), mesh.nodes.len());
+        let list: Vec<usize> = touched.iter().map(|&e| e as usize).collect();
+        mesh.check_elements(&list, &ValidationOptions::default())?;
+        let origins = NodeOrigins::of_polygon_cut(report, nodes_before)
+            .map_err(|m| Error::Parameter(format!("internal: {m} after a cut")))?;
+        if origins.len() != mesh.nodes.len() {
+            let message = format!("internal: {} node states for {} nodes after a cut", origins.len(), mesh.nodes.len());
             return Err(Error::Parameter(message));
         }
         // the touched elements' nodes before the cut, then their new data
-        let old_nodes = self.store.nodes_of(&report.touched);
+        let old_nodes = self.store.nodes_of(touched);
         let t = std::time::Instant::now();
-        self.store.update(mesh, &self.params.material, &self.params.basis, &report.touched)?;
+        let changes = self.store.update(mesh, &self.params.material, &self.params.basis, touched)?;
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
-        let [displacement, velocity, previous_velocity] = state;
-        self.displacement = displacement;
-        self.velocity = velocity;
-        self.previous_velocity = previous_velocity;
+        // the nodes whose mass changes: those of the touched elements,
+        // before and after
+        let mut changed_nodes = old_nodes.clone();
+        changed_nodes.extend(self.store.nodes_of(touched));
+        changed_nodes.sort_unstable();
+        changed_nodes.dedup();
+        let old_changed: Vec<u32> = changed_nodes.iter().copied().filter(|&v| (v as usize) < nodes_before).collect();
+        let before = momenta(&old_changed, &self.masses, &self.position, &self.velocity);
+        origins.extend(&mut self.displacement);
+        origins.extend(&mut self.velocity);
+        origins.extend(&mut self.previous_velocity);
         let t = std::time::Instant::now();
-        self.pattern.update(self.mesh.nodes.len(), &self.store, &report.touched, &old_nodes);
+        self.pattern.update(self.mesh.nodes.len(), &self.store, touched, &old_nodes);
         self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
+        self.masses = self.store.lumped_masses(self.mesh.nodes.len(), self.params.material.density);
+        self.refresh_positions();
+        conserve_momentum(&changed_nodes, &self.masses, &self.position, &mut self.velocity, before);
+        self.corotation.apply_changes(&self.store, &changes, &self.position, self.params.corotated);
         self.refresh_topology();
         Ok(())
     }
 
-    /// After the mesh, element store and pattern changed: masses,
-    /// rotations, solver and scratch follow (the state vectors must already
-    /// match).
+    /// After the mesh, element store, pattern, masses and rotations
+    /// changed: solver, scratch and the boundary follow.
     fn refresh_topology(&mut self) {
         let n = self.mesh.nodes.len();
-        self.masses = self.store.lumped_masses(n, self.params.material.density);
-        self.corotation.reset(&self.store);
         self.solver = make_solver(self.params.solver, 3 * n, self.params.tolerance, self.params.max_iterations);
         self.analysed = false;
         self.referenced = false;
         // every entry is written by the next assembly
         self.values.resize(self.pattern.nnz(), 0.0);
         self.boundary = self.mesh.boundary_triangles();
-        self.refresh_positions();
     }
 
     /// Prescribed displacements: fixed regions, then pins; nodes of no

@@ -13,9 +13,12 @@ use crate::mesh::PolyMesh;
 /// Largest vertex count a mean value element may have.
 pub const MAX_VERTICES: usize = 256;
 
-/// Relative tolerance of the convexity check (of the element diameter); it
-/// admits the snapping of cut planes (`1e-4` of an edge).
-const CONVEXITY_TOLERANCE: f64 = 1e-3;
+/// Deepest fold a mean value element may have, relative to its diameter
+/// ([`PolyMesh::non_convexity`]): the snapping of cuts bends caps by up to
+/// `SplitOptions::snap` (0.1) of the element they cross, which wicke2007
+/// §4 accepts (mean value coordinates are well defined on any closed
+/// triangulated polyhedron); an L-prism's notch (about 0.3) is refused.
+const CONVEXITY_TOLERANCE: f64 = 0.1;
 
 /// Per-thread scratch of the batch build.
 struct Scratch {
@@ -82,6 +85,11 @@ pub(super) fn build_batch(
         };
         if !(v > 0.0) {
             return Err(BasisError::DegenerateElement { element, volume: v });
+        }
+        // the rule's cones from the centroid to the surface triangles must
+        // all be positive (the element star-shaped about its centroid)
+        if wts.iter().any(|&w| !(w > 0.0)) || mu.iter().any(|&m| !(m > 0.0)) {
+            return Err(BasisError::NotStarShaped { element });
         }
         *vol = v;
         mean_value::evaluate(verts, tris, pts, &mut s.phi, &mut s.grad);

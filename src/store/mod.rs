@@ -14,6 +14,7 @@
 //! basis (`trilinear`).
 
 pub mod harmonic;
+mod health;
 mod mean_value;
 mod tet;
 mod trilinear;
@@ -21,6 +22,7 @@ mod trilinear;
 use rayon::prelude::*;
 
 pub use harmonic::HarmonicOptions;
+pub use health::HealthFloors;
 
 use thiserror::Error;
 
@@ -47,6 +49,34 @@ pub enum BasisError {
     /// or a degenerate face).
     #[error("the harmonic basis of element {element} cannot be fitted (degenerate face or element)")]
     HarmonicFit { element: usize },
+    /// The element stiffness has a soft mode: its seventh eigenvalue is
+    /// negligible against its largest.
+    #[error("element {element} has a soft mode: λ7/λmax of its stiffness is {ratio:.2e}, below the floor {floor:.0e} (two nodes almost on top of each other, or a sliver)")]
+    SoftElement { element: usize, ratio: f64, floor: f64 },
+    /// The element stiffness resists a rigid motion.
+    #[error("element {element}: its stiffness resists a rigid motion (|K q| / λmax = {residual:.2e})")]
+    RigidModes { element: usize, residual: f64 },
+    /// A node gets a negligible share of the element's mass.
+    #[error(
+        "element {element}: node {node} gets {fraction:.2e} of the mean nodal mass share, below the floor {floor:.0e}"
+    )]
+    LightNode { element: usize, node: usize, fraction: f64, floor: f64 },
+}
+
+impl BasisError {
+    /// The element the error names.
+    pub fn element(&self) -> usize {
+        match *self {
+            BasisError::NonConvex { element }
+            | BasisError::TooManyVertices { element, .. }
+            | BasisError::DegenerateElement { element, .. }
+            | BasisError::NotStarShaped { element }
+            | BasisError::HarmonicFit { element }
+            | BasisError::SoftElement { element, .. }
+            | BasisError::RigidModes { element, .. }
+            | BasisError::LightNode { element, .. } => element,
+        }
+    }
 }
 
 /// How the elements of a batch are represented.
@@ -106,6 +136,9 @@ pub struct Batch {
     pub weights: Vec<f64>,
     /// Quadrature points per element.
     pub points_per_element: usize,
+    /// `λ₇ / λ_max` of each element's stiffness (the health check's
+    /// measure of its softest deformation), one per element.
+    pub stiffness_ratio: Vec<f64>,
 }
 
 impl Batch {
@@ -144,6 +177,7 @@ impl Batch {
         take_last(&mut self.triangles, i, n);
         take_last(&mut self.points, i, n);
         take_last(&mut self.weights, i, n);
+        take_last(&mut self.stiffness_ratio, i, n);
     }
 
     /// Appends the entries of `other` (same kind, `k` and quadrature size).
@@ -158,6 +192,7 @@ impl Batch {
         self.triangles.append(&mut other.triangles);
         self.points.append(&mut other.points);
         self.weights.append(&mut other.weights);
+        self.stiffness_ratio.append(&mut other.stiffness_ratio);
     }
 
     /// A batch of the same kind, `k`, material and quadrature with no entries.
@@ -202,8 +237,15 @@ impl Batch {
 
     /// The dense row-major `3k x 3k` element stiffness `K_e` of entry `i`.
     pub fn element_matrix(&self, i: usize) -> Vec<f64> {
-        let (k, n) = (self.k, 3 * self.k);
+        let n = 3 * self.k;
         let mut ke = vec![0.0; n * n];
+        self.element_matrix_into(i, &mut ke);
+        ke
+    }
+
+    /// [`Batch::element_matrix`] into `ke` (`9 k^2` values).
+    pub fn element_matrix_into(&self, i: usize, ke: &mut [f64]) {
+        let (k, n) = (self.k, 3 * self.k);
         for a in 0..k {
             for b in 0..k {
                 let blk = self.block(i, a, b);
@@ -212,7 +254,6 @@ impl Batch {
                 }
             }
         }
-        ke
     }
 
     /// `K_e u` for entry `i` and element-local displacements `u` (`k`
@@ -256,6 +297,20 @@ pub struct BasisOptions {
     pub quadrature: QuadratureRule,
     /// Fit and quadrature of harmonic elements.
     pub harmonic: HarmonicOptions,
+    /// The health every built element must have.
+    pub health: HealthFloors,
+}
+
+/// How [`ElementStore::update`] moved the batch entries, in the order it
+/// did: per-element state kept beside the store replays it to stay aligned.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct StoreChanges {
+    /// `(batch, index)` of every entry removed, in order; each removal
+    /// moves the batch's last entry into `index` (swap-remove).
+    pub removed: Vec<(u32, u32)>,
+    /// `(batch, first index, count)` of the entries appended afterwards
+    /// (a batch index past the previous batch count is a new batch).
+    pub appended: Vec<(u32, u32, u32)>,
 }
 
 /// Every element of a mesh, batched by vertex count.
@@ -278,20 +333,23 @@ impl ElementStore {
     /// Rebuilds the data of the `changed` elements (mesh ids; ids past the
     /// store's element count are new elements) after a topology change and
     /// keeps every other element's data as it is: removed entries are
-    /// filled by their batch's last entry, rebuilt ones are appended. On
-    /// error the store is unchanged.
+    /// filled by their batch's last entry, rebuilt ones are appended. Returns
+    /// those moves, so that per-element state kept elsewhere (rotations)
+    /// can follow them. On error the store is unchanged.
     pub fn update(
         &mut self,
         mesh: &PolyMesh,
         material: &Material,
         options: &BasisOptions,
         changed: &[u32],
-    ) -> Result<(), BasisError> {
+    ) -> Result<StoreChanges, BasisError> {
         let fresh = Self::build_elements(mesh, material, options, changed.iter().copied())?;
+        let mut moves = StoreChanges::default();
         for &e in changed {
             if let Some(&(b, i)) = self.locate.get(e as usize) {
                 let batch = &mut self.batches[b as usize];
                 batch.swap_remove(i as usize);
+                moves.removed.push((b, i));
                 if let Some(&moved) = batch.elements.get(i as usize) {
                     self.locate[moved as usize] = (b, i);
                 }
@@ -312,9 +370,10 @@ impl ElementStore {
             for (i, &e) in batch.elements.iter().enumerate() {
                 self.locate[e as usize] = (b as u32, (start + i) as u32);
             }
+            moves.appended.push((b as u32, start as u32, batch.len() as u32));
             self.batches[b].append(batch);
         }
-        Ok(())
+        Ok(moves)
     }
 
     /// The nodes of the listed elements (mesh ids; unknown ones are
@@ -376,6 +435,9 @@ impl ElementStore {
                 }
             };
             store.batches.push(batch);
+        }
+        for batch in &mut store.batches {
+            health::check(batch, &options.health)?;
         }
         Ok(store)
     }
@@ -519,5 +581,6 @@ pub(crate) fn fill_batch<S>(
         points,
         weights,
         points_per_element: nq,
+        stiffness_ratio: Vec::new(),
     })
 }

@@ -46,5 +46,6 @@ pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u3
         points: Vec::new(),
         weights: Vec::new(),
         points_per_element: 1,
+        stiffness_ratio: Vec::new(),
     })
 }

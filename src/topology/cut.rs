@@ -9,7 +9,7 @@
 //! sides shared become two boundary faces and the body opens there.
 //! Positions are in the mesh's rest (material) frame.
 
-use super::split::{snap_band, split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
+use super::split::{on_plane_band, split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
 use crate::mesh::{Face, PolyMesh};
 
 /// What a plane cut changed.
@@ -25,12 +25,15 @@ pub struct CutReport {
 }
 
 /// The elements a separation along `plane` can involve, in increasing
-/// order: those with a node within `band` of the plane (the snapping
-/// band) or shared with an element `split` split or kept whole. Every
-/// element holding a node that elements on both sides use is among them:
-/// such a node lies in the band, or on an element the plane crossed.
-pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, band: f64, split: &SplitReport) -> Vec<u32> {
+/// order: those with a node on the plane (within [`on_plane_band`], or
+/// taken to lie on it by `split`) or shared with an element `split` split or
+/// kept whole. Every element holding a node that elements on both sides use
+/// is among them: such a node lies on the plane, or on an element the plane
+/// crossed.
+pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, split: &SplitReport) -> Vec<u32> {
+    let band = on_plane_band(mesh);
     let mut marked: Vec<bool> = plane.distances(&mesh.nodes).iter().map(|d| d.abs() <= band).collect();
+    split.on_plane.iter().for_each(|&v| marked[v as usize] = true);
     let crossed = split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.kept_whole.iter().copied());
     for e in crossed {
         mesh.elements[e as usize].nodes.iter().for_each(|&v| marked[v as usize] = true);
@@ -42,14 +45,25 @@ pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, band: f64, split: &Spli
 
 /// Side of the `region` elements with respect to `plane` (+1 or -1, 0 for
 /// elements outside the region): the side of the element's vertex
-/// farthest from the plane (after a split no element straddles it but
-/// those kept whole, which go with their larger part).
-pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32]) -> Vec<i8> {
-    let dist = |v: u32| plane.distance(mesh.nodes[v as usize]);
+/// farthest from the plane among those `split` did not take to lie on it
+/// (a snapped node can lie farther than an unsnapped one of a smaller
+/// element). After a split no element straddles the plane but those kept
+/// whole, which go with their larger part.
+pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32], split: &SplitReport) -> Vec<i8> {
+    let first_new = mesh.nodes.len() as u32 - split.new_nodes.len() as u32;
+    let on_plane = |v: u32| v >= first_new || split.on_plane.binary_search(&v).is_ok();
     let mut side = vec![0; mesh.elements.len()];
     for &e in region {
         let nodes = &mesh.elements[e as usize].nodes;
-        let d = nodes.iter().map(|&v| dist(v)).fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m });
+        let farthest = |off: bool| {
+            nodes
+                .iter()
+                .filter(|&&v| !off || !on_plane(v))
+                .map(|&v| plane.distance(mesh.nodes[v as usize]))
+                .fold(0.0f64, |m, d| if d.abs() > m.abs() { d } else { m })
+        };
+        let off = farthest(true);
+        let d = if off != 0.0 { off } else { farthest(false) };
         side[e as usize] = if d < 0.0 { -1 } else { 1 };
     }
     side
@@ -58,8 +72,8 @@ pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32]) -> V
 /// Splits along `plane` and separates the two sides (see module docs).
 pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<CutReport, SplitError> {
     let split = split_by_plane(mesh, plane, opts)?;
-    let region = cut_region(mesh, plane, snap_band(mesh, opts), &split);
-    let side = element_sides(mesh, plane, &region);
+    let region = cut_region(mesh, plane, &split);
+    let side = element_sides(mesh, plane, &region, &split);
     let (duplicated, mut touched) = separate(mesh, &region, &side, |_| true, |_| true);
     touched.extend(split.split_elements.iter().flat_map(|&(a, b)| [a, b]));
     touched.extend(split.repaired_elements.iter().copied());

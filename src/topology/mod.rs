@@ -7,9 +7,12 @@ mod polygon;
 mod rollback;
 mod sliver;
 mod split;
+mod transfer;
 
 pub use cut::{cut_by_plane, CutReport};
 pub use polygon::{cut_by_polygon, polygon_plane, PolygonCutReport};
 pub use rollback::Rollback;
 pub use sliver::{merge_slivers, SliverReport};
+pub(crate) use split::classify_split;
 pub use split::{split_by_plane, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};
+pub use transfer::{conserve_momentum, momenta, NodeOrigins};

@@ -18,7 +18,9 @@ use std::collections::HashMap;
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 
 use super::cut::{cut_region, element_sides, separate, CutReport};
-use super::split::{plane_basis, snap_band, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions};
+use super::split::{
+    on_plane_band, plane_basis, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, ON_PLANE,
+};
 use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
 
 /// What a polygon cut changed, beyond a plane cut's report.
@@ -167,8 +169,8 @@ pub fn cut_by_polygon(
     // theirs); an element kept whole (a part would have been a sliver) is
     // cut around: its faces towards the other side take the place of the
     // cap it did not get
-    let band = snap_band(mesh, opts);
-    let region = cut_region(mesh, &plane, band, &split);
+    let band = on_plane_band(mesh);
+    let region = cut_region(mesh, &plane, &split);
     let mut region_faces: Vec<u32> =
         region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
     region_faces.sort_unstable();
@@ -182,7 +184,7 @@ pub fn cut_by_polygon(
     let mut in_plane: Vec<u32> = split.caps.clone();
     let mut listed = vec![false; mesh.faces.len()];
     in_plane.iter().for_each(|&f| listed[f as usize] = true);
-    let side = element_sides(mesh, &plane, &region);
+    let side = element_sides(mesh, &plane, &region, &split);
     let mut detour: Vec<u32> = Vec::new();
     for &e in &split.kept_whole {
         for r in &mesh.elements[e as usize].faces {
@@ -194,27 +196,39 @@ pub fn cut_by_polygon(
             }
         }
     }
+    // a node lies on the plane when the split took it to (snapped), made it,
+    // or it lies within the rounding band of it (a former cut's)
+    let first_new = mesh.nodes.len() as u32 - split.new_nodes.len() as u32;
+    let on_plane = |mesh: &PolyMesh, v: u32| {
+        v >= first_new || split.on_plane.binary_search(&v).is_ok() || dist(mesh.nodes[v as usize]).abs() <= band
+    };
     for &f in &region_faces {
         let face = &mesh.faces[f as usize];
-        if listed[f as usize]
-            || users[&f].len() != 2
-            || face.vertices.iter().any(|&v| !(dist(mesh.nodes[v as usize]).abs() <= band))
-        {
-            continue;
-        }
-        let g = face_geometry(&mesh.nodes, &face.vertices);
-        if face.vertices.iter().all(|&v| dist(mesh.nodes[v as usize]).abs() <= opts.snap * g.diameter) {
+        if !listed[f as usize] && users[&f].len() == 2 && face.vertices.iter().all(|&v| on_plane(mesh, v)) {
             listed[f as usize] = true;
             in_plane.push(f);
         }
     }
+    // a vertex closer to a polygon edge's line than `snap` times the
+    // largest element around it lies on the line: a face is then split
+    // along a chord through it instead of next to it (the parts stay
+    // planar and convex, only the cut's outline strays from the line), so
+    // no node is made closer than that to a node of an element on its edge
+    let mut line_snap: HashMap<u32, f64> = HashMap::new();
+    for &e in &region {
+        let r = opts.snap * mesh.element_diameter(e as usize);
+        for &v in &mesh.elements[e as usize].nodes {
+            let entry = line_snap.entry(v).or_insert(r);
+            *entry = entry.max(r);
+        }
+    }
     // faces touching each node of the plane (stale entries are re-checked)
     let mut node_faces: HashMap<u32, Vec<u32>> = HashMap::new();
-    let on_plane: std::collections::HashSet<u32> =
+    let plane_vertices: std::collections::HashSet<u32> =
         in_plane.iter().flat_map(|&f| mesh.faces[f as usize].vertices.iter().copied()).collect();
     for &f in &region_faces {
         for &v in &mesh.faces[f as usize].vertices {
-            if on_plane.contains(&v) {
+            if plane_vertices.contains(&v) {
                 node_faces.entry(v).or_default().push(f);
             }
         }
@@ -228,12 +242,12 @@ pub fn cut_by_polygon(
             let f = in_plane[k] as usize;
             k += 1;
             let lp = mesh.faces[f].vertices.clone();
-            let diameter = face_geometry(&mesh.nodes, &lp).diameter;
             let s: Vec<i8> = lp
                 .iter()
                 .map(|&v| {
                     let d = side_of(a2, b2, frame.project(mesh.nodes[v as usize]));
-                    if d.abs() <= opts.snap * diameter {
+                    // (nodes made here lie on the line up to rounding)
+                    if d.abs() <= line_snap.get(&v).copied().unwrap_or(0.0).max(ON_PLANE * size) {
                         0
                     } else if d > 0.0 {
                         1
@@ -272,6 +286,11 @@ pub fn cut_by_polygon(
                         new_nodes.push(NewNode { id, a: key.0, b: key.1, t });
                         id
                     });
+                    // a node on an edge lies on a later line wherever both
+                    // ends of its edge do
+                    let radius = |v: u32| line_snap.get(&v).copied().unwrap_or(0.0);
+                    let r = radius(va).max(radius(vb));
+                    line_snap.entry(c).or_insert(r);
                     inside.push(c);
                     outside.push(c);
                     // the new node joins every other face on this edge
@@ -312,25 +331,38 @@ pub fn cut_by_polygon(
         |p: [f64; 2], margin: f64| (0..n_pts).all(|i| side_of(outline[i], outline[(i + 1) % n_pts], p) > margin);
     let face_centre =
         |mesh: &PolyMesh, f: u32| frame.project(face_geometry(&mesh.nodes, &mesh.faces[f as usize].vertices).centroid);
-    let tol = opts.snap * size;
+    let tol = ON_PLANE * size;
     let mut inside_faces: Vec<u32> =
         in_plane.iter().copied().filter(|&f| inside_polygon(face_centre(mesh, f), -tol)).collect();
     let node_inside = |mesh: &PolyMesh, v: u32| inside_polygon(frame.project(mesh.nodes[v as usize]), tol);
     let mut pocket = None;
     let has_inner = inside_faces.iter().any(|&f| mesh.faces[f as usize].vertices.iter().any(|&v| node_inside(mesh, v)));
     if !has_inner {
-        let c2 = frame.project(centroid);
-        // the pocket node lies in the plane: only a face in it can host it
-        let host = inside_faces.iter().copied().filter(|f| !detour.contains(f)).find(|&f| {
-            let mut pts: Vec<[f64; 2]> =
-                mesh.faces[f as usize].vertices.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
+        // the pocket node goes to the centroid of the face in the plane
+        // (inside the polygon) that leaves it the most room, and only where
+        // it keeps `min_spacing` of the elements around it from its nodes
+        let clearance = |mesh: &PolyMesh, f: u32| {
+            let lp = &mesh.faces[f as usize].vertices;
+            let c = face_geometry(&mesh.nodes, lp).centroid;
+            let c2 = frame.project(c);
+            let mut pts: Vec<[f64; 2]> = lp.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
             ccw(&mut pts);
-            (0..pts.len()).all(|i| side_of(pts[i], pts[(i + 1) % pts.len()], c2) > tol)
-        });
-        if let Some(f) = host {
+            let room =
+                (0..pts.len()).map(|i| side_of(pts[i], pts[(i + 1) % pts.len()], c2)).fold(f64::INFINITY, f64::min);
+            let size = users[&f].iter().map(|&e| mesh.element_diameter(e as usize)).fold(f64::INFINITY, f64::min);
+            (room / size, c)
+        };
+        let host = inside_faces
+            .iter()
+            .copied()
+            .filter(|f| !detour.contains(f) && mesh.faces[*f as usize].vertices.iter().all(|&v| on_plane(mesh, v)))
+            .map(|f| (f, clearance(mesh, f)))
+            .filter(|(_, (room, _))| *room >= opts.min_spacing)
+            .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
+        if let Some((f, (_, position))) = host {
             let lp = mesh.faces[f as usize].vertices.clone();
             let c = mesh.nodes.len() as u32;
-            mesh.nodes.push(add(frame.origin, add(scale(frame.u, c2[0]), scale(frame.w, c2[1]))));
+            mesh.nodes.push(position);
             let fan: Vec<u32> = (0..lp.len())
                 .map(|i| {
                     let tri = vec![c, lp[i], lp[(i + 1) % lp.len()]];

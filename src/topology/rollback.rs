@@ -1,16 +1,16 @@
 //! Undoing a failed cut without copying the mesh.
 //!
 //! A cut only appends nodes, faces and elements, and rewrites elements (and
-//! their faces) that share a node with an element reaching into the band
-//! `|distance| <= band` around the cut's plane (`band` being the largest
-//! snapping distance of the split, `split::snap_band`): splits change the
-//! crossed elements and the faces around crossed edges, separation renames
-//! nodes on (or, around elements kept whole, next to) the plane, and
+//! their faces) that share a node with an element reaching the cut's plane
+//! (straddling it, or with a node within `split::on_plane_band` of it):
+//! splits change the crossed elements and the faces around crossed edges
+//! (every node they snap belongs to a straddling element), separation
+//! renames nodes on (or, around elements kept whole, next to) the plane, and
 //! polygon cuts split faces in the plane. [`Rollback::around_plane`] saves exactly those
 //! elements and faces, so a cut that fails half-way can be undone in time
 //! proportional to the region it touched.
 
-use super::split::{snap_band, Plane, SplitOptions};
+use super::split::{on_plane_band, Plane};
 use crate::mesh::{Element, Face, FaceRef, PolyMesh};
 
 /// What a cut may change, saved before it runs (flat, so saving costs no
@@ -56,11 +56,10 @@ impl<T: Copy> Flat<T> {
 }
 
 impl Rollback {
-    /// Saves what a cut along `plane` with `opts` may change: the elements
-    /// sharing a node with an element that reaches within the snapping band
-    /// of the plane, and their faces.
-    pub fn around_plane(mesh: &PolyMesh, plane: &Plane, opts: &SplitOptions) -> Self {
-        let band = snap_band(mesh, opts);
+    /// Saves what a cut along `plane` may change: the elements sharing a
+    /// node with an element that reaches the plane, and their faces.
+    pub fn around_plane(mesh: &PolyMesh, plane: &Plane) -> Self {
+        let band = on_plane_band(mesh);
         let dist = plane.distances(&mesh.nodes);
         let mut near = vec![false; mesh.nodes.len()];
         for el in &mesh.elements {
