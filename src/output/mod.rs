@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use crate::io::{write_boundary_obj, write_vtu, IoError, VtuFields};
 use crate::scene::Format;
-use crate::sim::{PhaseTimings, Simulation};
+use crate::sim::{Located, PhaseTimings, Simulation};
 
 /// Writes frame `index` of `sim` in `formats` into `dir`
 /// (`frame_NNNN.vtu`, `frame_NNNN.obj`). Points are the deformed positions;
@@ -125,6 +125,21 @@ pub struct Summary {
     pub solver: SolverSummary,
     /// Frames written.
     pub frames: usize,
+    /// The largest element stretch (deformed over rest diameter) over the
+    /// written frames, and the element.
+    pub worst_stretch: Located,
+    /// The fastest node (m/s) over the written frames, and the node.
+    pub max_node_speed: Located,
+    /// The speed free fall reaches by the end of the run, `|v0| + |g| t`
+    /// (m/s): what no node should exceed by much.
+    pub free_fall_speed: f64,
+    /// The smallest lumped mass of a node over the mean nodal mass of its
+    /// elements, over the run (checked at the start and after every cut),
+    /// and the node.
+    pub min_mass_ratio: Located,
+    /// Cuts run again with one more element kept whole because the element
+    /// store found a part unhealthy.
+    pub cut_retries: usize,
 }
 
 impl MeshCounts {

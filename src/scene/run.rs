@@ -9,7 +9,7 @@ use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
-use crate::sim::{Collider, FixedRegion, Simulation, SimulationParams};
+use crate::sim::{Collider, FixedRegion, Located, Simulation, SimulationParams};
 use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
 use crate::topology::merge_slivers;
 use crate::topology::Plane;
@@ -110,6 +110,7 @@ impl LoadedScene {
             solver: s.solver.kind,
             tolerance: s.solver.tolerance,
             max_iterations: s.solver.max_iterations,
+            ..Default::default()
         };
         let mut sim = Simulation::new(mesh, params)?;
         for f in &s.fixed {
@@ -153,9 +154,18 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
     let s = &scene.scene;
     let mut stats = Vec::new();
     let mut frames = 0;
+    let (mut worst_stretch, mut max_node_speed) = (Located { value: 1.0, at: 0 }, Located::default());
+    let mut min_mass_ratio = sim.min_mass_ratio();
     let mut write = |sim: &mut Simulation, index: usize| -> Result<(), Error> {
         let t = Instant::now();
         write_frame(&dir, index, sim, &s.output.formats)?;
+        let (stretch, speed) = (sim.worst_stretch(), sim.max_node_speed());
+        if stretch.value > worst_stretch.value {
+            worst_stretch = stretch;
+        }
+        if speed.value > max_node_speed.value {
+            max_node_speed = speed;
+        }
         sim.record_output_time(t.elapsed().as_secs_f64());
         frames += 1;
         Ok(())
@@ -181,6 +191,10 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
                         }
                         (None, None) => {}
                     }
+                    let ratio = sim.min_mass_ratio();
+                    if ratio.value < min_mass_ratio.value {
+                        min_mass_ratio = ratio;
+                    }
                 }
                 stats.push(sim.step()?.solve);
                 if step % s.output.every == 0 {
@@ -194,8 +208,8 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
     };
     let adjacency = sim.mesh().adjacency();
     let (_, components) = adjacency.element_components(sim.mesh());
-    let max_displacement =
-        sim.displacements().iter().map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()).fold(0.0, f64::max);
+    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let free_fall_speed = norm(s.simulation.velocity) + norm(s.simulation.gravity) * sim.time();
     let wall = *sim.timings();
     let total = started.elapsed().as_secs_f64();
     let summary = Summary {
@@ -209,7 +223,7 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
         wall_time: wall,
         wall_time_total: total,
         ms_per_step: 1e3 * (wall.rotation + wall.assembly + wall.solve) / steps.max(1) as f64,
-        max_displacement,
+        max_displacement: sim.max_displacement(),
         elastic_energy: sim.elastic_energy(),
         kinetic_energy: sim.kinetic_energy(),
         solver: SolverSummary {
@@ -218,6 +232,11 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
             residual: MeanMax::of(stats.iter().map(|s| s.residual)),
         },
         frames,
+        worst_stretch,
+        max_node_speed,
+        free_fall_speed,
+        min_mass_ratio,
+        cut_retries: sim.cut_retries(),
     };
     write_summary(&dir.join("summary.json"), &summary)?;
     Ok(summary)

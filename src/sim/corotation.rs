@@ -61,6 +61,18 @@ impl BatchState {
         }
     }
 
+    /// The rotation (row-major) of entry `i` of batch `b` at positions `x`
+    /// (m), warm-started from the stored one, without storing it; the
+    /// identity if not `warp`.
+    fn rotation_at(&self, b: &Batch, i: usize, x: &[[f64; 3]], warp: bool) -> [f64; 9] {
+        if !warp {
+            return IDENTITY;
+        }
+        let mut q = [self.quaternion[i]];
+        polar_rotations(&[b.field_gradient(i, x)], &mut q);
+        rotation_matrix(q[0])
+    }
+
     /// Deformation gradients, rotations (if `warp`), forces and, for
     /// tetrahedra, rotated gradients of the entries `range` of batch `b` at
     /// positions `x` (m); returns the largest number of rotation iterations.
@@ -68,19 +80,11 @@ impl BatchState {
         let k = b.k;
         let first = range.start;
         // 1. deformation gradients
-        self.gradient[range.clone()].par_iter_mut().with_min_len(TASK).enumerate().for_each(|(j, f)| {
-            let i = first + j;
-            let mut m = [0.0; 9];
-            for a in 0..k {
-                let (xa, g) = (x[b.nodes[i * k + a] as usize], b.stress_grads[i * k + a]);
-                for r in 0..3 {
-                    for c in 0..3 {
-                        m[3 * r + c] += xa[r] * g[c];
-                    }
-                }
-            }
-            *f = m;
-        });
+        self.gradient[range.clone()]
+            .par_iter_mut()
+            .with_min_len(TASK)
+            .enumerate()
+            .for_each(|(j, f)| *f = b.field_gradient(first + j, x));
         // 2. rotations, SIMD over elements, warm-started
         let mut most = 0;
         if warp {
@@ -245,9 +249,11 @@ impl Corotation {
             .collect()
     }
 
-    /// Rotation (row-major) of entry `i` of `batch` from the last update.
-    pub fn rotation(&self, batch: usize, i: usize) -> &[f64; 9] {
-        &self.batches[batch].rotation[i]
+    /// Rotation (row-major) of entry `i` of batch `batch` of `store` at
+    /// positions `x` (m): extracted there, warm-started from the stored
+    /// one (the identity if not `warp`).
+    pub fn rotation_at(&self, store: &ElementStore, batch: usize, i: usize, x: &[[f64; 3]], warp: bool) -> [f64; 9] {
+        self.batches[batch].rotation_at(&store.batches[batch], i, x, warp)
     }
 
     /// Elastic force on local node `a` of entry `i` of batch `batch` (N).
@@ -311,9 +317,12 @@ impl Corotation {
         }
     }
 
-    /// Elastic energy `½ Σ_e (Rᵀx - X)ᵀ K_e (Rᵀx - X)` (J) at positions `x`
-    /// with the current rotations.
-    pub fn energy(&self, store: &ElementStore, x: &[[f64; 3]]) -> f64 {
+    /// Elastic energy `½ Σ_e (Rᵀx - X)ᵀ K_e (Rᵀx - X)` (J) at positions `x`,
+    /// with each element's rotation `R` extracted at `x` (warm-started from
+    /// the stored one; the identity if not `warp`): a step leaves the
+    /// rotations of the positions it started from, which would misstate
+    /// the energy of a body turning fast.
+    pub fn energy(&self, store: &ElementStore, x: &[[f64; 3]], warp: bool) -> f64 {
         store
             .batches
             .iter()
@@ -324,9 +333,10 @@ impl Corotation {
                     .with_min_len(TASK)
                     .map(|i| {
                         let k = b.k;
+                        let r = st.rotation_at(b, i, x, warp);
                         let u: Vec<[f64; 3]> = (0..k)
                             .map(|a| {
-                                let l = mat_t_vec(&st.rotation[i], x[b.nodes[i * k + a] as usize]);
+                                let l = mat_t_vec(&r, x[b.nodes[i * k + a] as usize]);
                                 let xr = b.rest[i * k + a];
                                 [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
                             })

@@ -19,9 +19,11 @@
 //! ```
 
 mod corotation;
+mod health;
 mod timings;
 
 pub use corotation::Corotation;
+pub use health::Located;
 pub use timings::{Phase, PhaseTimings};
 
 use cleave_kernels::elasticity::{stress, von_mises};
@@ -32,10 +34,14 @@ use crate::mesh::{PolyMesh, ValidationOptions};
 use crate::solve::{make_solver, solve_checked, LinearSolver, SolveStats, SolverKind};
 use crate::store::{BasisOptions, ElementStore};
 use crate::topology::{
-    conserve_momentum, cut_by_plane, cut_by_polygon, momenta, polygon_plane, CutReport, NodeOrigins, Plane,
-    PolygonCutReport, Rollback, SplitOptions,
+    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, polygon_plane, CutReport, NodeOrigins,
+    Plane, PolygonCutReport, Rollback, SplitOptions,
 };
 use crate::Error;
+
+/// How many times a cut is tried, each time keeping whole one more element
+/// whose parts the element store found unhealthy.
+pub const CUT_ATTEMPTS: usize = 16;
 
 /// Physical and numerical parameters of a simulation.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +68,8 @@ pub struct SimulationParams {
     pub tolerance: f64,
     /// Iteration cap of the iterative solver.
     pub max_iterations: usize,
+    /// How cuts split elements: snapping and the health of the parts.
+    pub cut: SplitOptions,
 }
 
 impl Default for SimulationParams {
@@ -77,6 +85,7 @@ impl Default for SimulationParams {
             solver: SolverKind::Auto,
             tolerance: 1e-8,
             max_iterations: 2000,
+            cut: SplitOptions::default(),
         }
     }
 }
@@ -177,6 +186,9 @@ pub struct Simulation {
     referenced: bool,
     values: Vec<f64>,
     steps: usize,
+    /// Cuts run again with one more element kept whole (see
+    /// [`CUT_ATTEMPTS`]).
+    cut_retries: usize,
     timings: PhaseTimings,
 }
 
@@ -228,6 +240,7 @@ impl Simulation {
             referenced: false,
             values,
             steps: 0,
+            cut_retries: 0,
             timings,
         })
     }
@@ -354,6 +367,12 @@ impl Simulation {
         self.steps
     }
 
+    /// How many times a cut was run again with one more element kept
+    /// whole, because the element store found a part it made unhealthy.
+    pub fn cut_retries(&self) -> usize {
+        self.cut_retries
+    }
+
     /// Simulated time (s).
     pub fn time(&self) -> f64 {
         self.steps as f64 * self.params.dt
@@ -370,38 +389,30 @@ impl Simulation {
     }
 
     /// Von Mises stress of every element (Pa): of the corotated mean strain
-    /// `sym(Rᵀ F) - I` with the rotations of the last step (identity before
-    /// the first step and in static solves).
+    /// `sym(Rᵀ F) - I`, with each element's rotation extracted at the
+    /// current positions (the identity when not corotated).
     pub fn von_mises(&self) -> Vec<f64> {
         let (l, m) = self.params.material.lame();
         let x = &self.position;
         let mut out = vec![0.0; self.mesh.elements.len()];
         for (bi, b) in self.store.batches.iter().enumerate() {
             for i in 0..b.len() {
-                let r = self.corotation.rotation(bi, i);
-                let mut g = [[0.0; 3]; 3];
-                for a in 0..b.k {
-                    let (xa, ga) = (x[b.nodes[i * b.k + a] as usize], b.stress_grads[i * b.k + a]);
-                    // Rᵀ x_a ⊗ g_a
-                    let l = [0, 1, 2].map(|p| r[p] * xa[0] + r[3 + p] * xa[1] + r[6 + p] * xa[2]);
-                    for p in 0..3 {
-                        for q in 0..3 {
-                            g[p][q] += l[p] * ga[q];
-                        }
-                    }
-                }
-                for (p, row) in g.iter_mut().enumerate() {
-                    row[p] -= 1.0;
-                }
+                let r = self.corotation.rotation_at(&self.store, bi, i, x, self.params.corotated);
+                let f = b.field_gradient(i, x);
+                // Rᵀ F - I
+                let g: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                    std::array::from_fn(|q| r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q] - f64::from(p == q))
+                });
                 out[b.elements[i] as usize] = von_mises(stress(g, l, m));
             }
         }
         out
     }
 
-    /// Elastic energy (J) with the rotations of the last step.
+    /// Elastic energy (J) at the current positions, with each element's
+    /// rotation extracted there (the identity when not corotated).
     pub fn elastic_energy(&self) -> f64 {
-        self.corotation.energy(&self.store, &self.position)
+        self.corotation.energy(&self.store, &self.position, self.params.corotated)
     }
 
     /// Kinetic energy `½ Σ m_i |v_i|²` (J).
@@ -447,8 +458,10 @@ impl Simulation {
     /// columns of their nodes are rebuilt. On error the simulation is left
     /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
-        let cut = |mesh: &mut PolyMesh| -> Result<PolygonCutReport, Error> {
-            Ok(PolygonCutReport { cut: cut_by_plane(mesh, plane, &SplitOptions::default())?, pocket: None })
+        let opts = self.params.cut;
+        let cut = |mesh: &mut PolyMesh, keep: &[u32]| -> Result<PolygonCutReport, Error> {
+            let cut = cut_by_plane_keeping(mesh, plane, &opts, keep)?;
+            Ok(PolygonCutReport { cut, pocket: None })
         };
         self.cut(plane, cut).map(|report| report.cut)
     }
@@ -459,28 +472,67 @@ impl Simulation {
     /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
         let plane = polygon_plane(polygon)?;
-        self.cut(&plane, |mesh| Ok(cut_by_polygon(mesh, polygon, &SplitOptions::default())?))
+        let opts = self.params.cut;
+        self.cut(&plane, |mesh, keep| Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep)?))
     }
 
-    /// Runs `cut` (a cut along `plane`) on the mesh in place and brings
-    /// everything else up to date; on error the mesh is rolled back.
+    /// Runs `cut` (a cut along `plane`, leaving the elements it is given
+    /// whole) on the mesh in place and brings everything else up to date.
+    /// When the element store finds an element the cut made or changed
+    /// unhealthy (see [`crate::store::HealthFloors`]), the cut is undone
+    /// and run again with the element it came from kept whole, up to
+    /// [`CUT_ATTEMPTS`] times; on any other error the mesh is rolled back.
     fn cut(
         &mut self,
         plane: &Plane,
-        cut: impl FnOnce(&mut PolyMesh) -> Result<PolygonCutReport, Error>,
+        cut: impl Fn(&mut PolyMesh, &[u32]) -> Result<PolygonCutReport, Error>,
     ) -> Result<PolygonCutReport, Error> {
         let t = std::time::Instant::now();
         let rebuild = |t: &PhaseTimings| t.basis + t.assembly + t.solve;
         let before = rebuild(&self.timings);
-        let rollback = Rollback::around_plane(&self.mesh, plane);
-        let nodes_before = self.mesh.nodes.len();
-        let result = cut(&mut self.mesh).and_then(|report| {
-            self.apply_cut(&report, nodes_before)?;
-            Ok(report)
-        });
-        if result.is_err() {
-            rollback.restore(&mut self.mesh);
-        }
+        let mut keep_whole: Vec<u32> = Vec::new();
+        let result = loop {
+            let rollback = Rollback::around_plane(&self.mesh, plane);
+            let (nodes_before, elements_before) = (self.mesh.nodes.len(), self.mesh.elements.len() as u32);
+            let outcome = match cut(&mut self.mesh, &keep_whole) {
+                Err(error) => Err((None, error)),
+                Ok(report) => match self.apply_cut(&report, nodes_before) {
+                    Ok(()) => Ok(report),
+                    Err(error) => {
+                        // an unhealthy element this cut touched comes from
+                        // the element with its id, or (a negative part) from
+                        // its positive part's
+                        let parent = match &error {
+                            Error::Basis(b) if report.cut.touched.binary_search(&(b.element() as u32)).is_ok() => {
+                                let e = b.element() as u32;
+                                let split = &report.cut.split.split_elements;
+                                Some(if e < elements_before {
+                                    e
+                                } else {
+                                    split.iter().find(|p| p.1 == e).map_or(e, |p| p.0)
+                                })
+                            }
+                            _ => None,
+                        };
+                        Err((parent, error))
+                    }
+                },
+            };
+            match outcome {
+                Ok(report) => break Ok(report),
+                Err((Some(parent), _)) if keep_whole.len() + 1 < CUT_ATTEMPTS => {
+                    rollback.restore(&mut self.mesh);
+                    if let Err(at) = keep_whole.binary_search(&parent) {
+                        keep_whole.insert(at, parent);
+                    }
+                    self.cut_retries += 1;
+                }
+                Err((_, error)) => {
+                    rollback.restore(&mut self.mesh);
+                    break Err(error);
+                }
+            }
+        };
         // the new pattern's analysis (Cholesky ordering and symbolic
         // factorisation, or the block structure of CG) makes the system
         // ready; the cut itself stands even if that fails

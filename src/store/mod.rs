@@ -256,6 +256,26 @@ impl Batch {
         }
     }
 
+    /// The gradient `Σ_a v_a ⊗ ḡ_a` (row-major, `G[r][c] = ∂v_r/∂x_c`) of the
+    /// nodal field `v` (indexed by node id) at entry `i`'s stress point,
+    /// `ḡ_a` its shape function gradients there (1/m): the deformation
+    /// gradient `F` for positions, `F - I` for displacements; exact for
+    /// tetrahedra, the volume average for polyhedra.
+    #[inline]
+    pub fn field_gradient(&self, i: usize, v: &[[f64; 3]]) -> [f64; 9] {
+        let k = self.k;
+        let mut m = [0.0; 9];
+        for a in 0..k {
+            let (va, g) = (v[self.nodes[i * k + a] as usize], self.stress_grads[i * k + a]);
+            for r in 0..3 {
+                for c in 0..3 {
+                    m[3 * r + c] += va[r] * g[c];
+                }
+            }
+        }
+        m
+    }
+
     /// `K_e u` for entry `i` and element-local displacements `u` (`k`
     /// 3-vectors, m): forces in N.
     pub fn apply_stiffness(&self, i: usize, u: &[[f64; 3]], out: &mut [[f64; 3]]) {
@@ -458,28 +478,6 @@ impl ElementStore {
     /// Total rest volume (m^3).
     pub fn total_volume(&self) -> f64 {
         self.batches.iter().flat_map(|b| b.volume.iter()).sum()
-    }
-
-    /// Displacement gradient `∂u_i/∂x_j` at the stress point of every element
-    /// (by mesh element id), from nodal displacements `u` (m).
-    pub fn displacement_gradients(&self, u: &[[f64; 3]]) -> Vec<[[f64; 3]; 3]> {
-        let mut out = vec![[[0.0; 3]; 3]; self.locate.len()];
-        for b in &self.batches {
-            for i in 0..b.len() {
-                let mut g = [[0.0; 3]; 3];
-                for a in 0..b.k {
-                    let ua = u[b.nodes[i * b.k + a] as usize];
-                    let ga = b.stress_grads[i * b.k + a];
-                    for r in 0..3 {
-                        for c in 0..3 {
-                            g[r][c] += ua[r] * ga[c];
-                        }
-                    }
-                }
-                out[b.elements[i] as usize] = g;
-            }
-        }
-        out
     }
 }
 

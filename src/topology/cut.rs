@@ -9,7 +9,7 @@
 //! sides shared become two boundary faces and the body opens there.
 //! Positions are in the mesh's rest (material) frame.
 
-use super::split::{on_plane_band, split_by_plane, Plane, SplitError, SplitOptions, SplitReport};
+use super::split::{on_plane_band, split, Plane, SplitError, SplitOptions, SplitReport};
 use crate::mesh::{Face, PolyMesh};
 
 /// What a plane cut changed.
@@ -71,7 +71,20 @@ pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32], spli
 
 /// Splits along `plane` and separates the two sides (see module docs).
 pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<CutReport, SplitError> {
-    let split = split_by_plane(mesh, plane, opts)?;
+    cut_by_plane_keeping(mesh, plane, opts, &[])
+}
+
+/// [`cut_by_plane`] leaving the sorted `keep_whole` elements as they are:
+/// not split and given no new node (the cut goes around them; the
+/// simulation retries a cut so when the element store finds a part
+/// unhealthy).
+pub fn cut_by_plane_keeping(
+    mesh: &mut PolyMesh,
+    plane: &Plane,
+    opts: &SplitOptions,
+    keep_whole: &[u32],
+) -> Result<CutReport, SplitError> {
+    let split = split(mesh, plane, None, keep_whole, opts)?;
     let region = cut_region(mesh, plane, &split);
     let side = element_sides(mesh, plane, &region, &split);
     let (duplicated, mut touched) = separate(mesh, &region, &side, |_| true, |_| true);

@@ -9,8 +9,8 @@ mod sliver;
 mod split;
 mod transfer;
 
-pub use cut::{cut_by_plane, CutReport};
-pub use polygon::{cut_by_polygon, polygon_plane, PolygonCutReport};
+pub use cut::{cut_by_plane, cut_by_plane_keeping, CutReport};
+pub use polygon::{cut_by_polygon, cut_by_polygon_keeping, polygon_plane, PolygonCutReport};
 pub use rollback::Rollback;
 pub use sliver::{merge_slivers, SliverReport};
 pub(crate) use split::classify_split;

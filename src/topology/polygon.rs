@@ -18,9 +18,7 @@ use std::collections::HashMap;
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 
 use super::cut::{cut_region, element_sides, separate, CutReport};
-use super::split::{
-    on_plane_band, plane_basis, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, ON_PLANE,
-};
+use super::split::{on_plane_band, plane_basis, split, NewNode, Plane, SplitError, SplitOptions, ON_PLANE};
 use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
 
 /// What a polygon cut changed, beyond a plane cut's report.
@@ -116,6 +114,18 @@ pub fn cut_by_polygon(
     polygon: &[[f64; 3]],
     opts: &SplitOptions,
 ) -> Result<PolygonCutReport, SplitError> {
+    cut_by_polygon_keeping(mesh, polygon, opts, &[])
+}
+
+/// [`cut_by_polygon`] leaving the sorted `keep_whole` elements as they
+/// are: not split, given no new node, their faces in the plane not split
+/// along the polygon's edges nor given a pocket.
+pub fn cut_by_polygon_keeping(
+    mesh: &mut PolyMesh,
+    polygon: &[[f64; 3]],
+    opts: &SplitOptions,
+    keep_whole: &[u32],
+) -> Result<PolygonCutReport, SplitError> {
     // the polygon's plane and its counter-clockwise 2-D outline
     let plane = polygon_plane(polygon)?;
     let (n_pts, centroid, normal) = (polygon.len(), plane.point, plane.normal);
@@ -160,7 +170,8 @@ pub fn cut_by_polygon(
         })
         .map(|e| e as u32)
         .collect();
-    let split = split_elements_by_plane(mesh, &plane, &chosen, opts)?;
+    let split = split(mesh, &plane, Some(&chosen), keep_whole, opts)?;
+    let protected = |e: &u32| keep_whole.binary_search(e).is_ok();
     let mut new_nodes = split.new_nodes.clone();
 
     // 2. the faces in the plane and who uses them, all within the region of
@@ -264,6 +275,17 @@ pub fn cut_by_polygon(
             if !(s.contains(&1) && s.contains(&-1)) || cuts != 2 || along_edge {
                 continue;
             }
+            // an element kept as it is keeps its faces and edges
+            let guarded = |g: u32| users.get(&g).is_some_and(|u| u.iter().any(protected));
+            let crossed_guarded = (0..lp.len()).filter(|&j| s[j] * s[(j + 1) % lp.len()] < 0).any(|j| {
+                let (va, vb) = (lp[j], lp[(j + 1) % lp.len()]);
+                node_faces
+                    .get(&va)
+                    .is_some_and(|fs| fs.iter().any(|&g| mesh.faces[g as usize].vertices.contains(&vb) && guarded(g)))
+            });
+            if guarded(f as u32) || crossed_guarded {
+                continue;
+            }
             let (mut inside, mut outside) = (Vec::new(), Vec::new());
             for j in 0..lp.len() {
                 let (va, vb) = (lp[j], lp[(j + 1) % lp.len()]);
@@ -338,12 +360,14 @@ pub fn cut_by_polygon(
     let mut pocket = None;
     let has_inner = inside_faces.iter().any(|&f| mesh.faces[f as usize].vertices.iter().any(|&v| node_inside(mesh, v)));
     if !has_inner {
-        // the pocket node goes to the centroid of the face in the plane
+        // the pocket node goes to the vertex mean of the face in the plane
         // (inside the polygon) that leaves it the most room, and only where
         // it keeps `min_spacing` of the elements around it from its nodes
         let clearance = |mesh: &PolyMesh, f: u32| {
+            // at the mean of the face's vertices, so that its state, their
+            // mean, is the field's value there
             let lp = &mesh.faces[f as usize].vertices;
-            let c = face_geometry(&mesh.nodes, lp).centroid;
+            let c = scale(lp.iter().fold([0.0; 3], |s, &v| add(s, mesh.nodes[v as usize])), 1.0 / lp.len() as f64);
             let c2 = frame.project(c);
             let mut pts: Vec<[f64; 2]> = lp.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
             ccw(&mut pts);
@@ -356,6 +380,7 @@ pub fn cut_by_polygon(
             .iter()
             .copied()
             .filter(|f| !detour.contains(f) && mesh.faces[*f as usize].vertices.iter().all(|&v| on_plane(mesh, v)))
+            .filter(|f| !users[f].iter().any(protected))
             .map(|f| (f, clearance(mesh, f)))
             .filter(|(_, (room, _))| *room >= opts.min_spacing)
             .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0));

@@ -152,7 +152,7 @@ pub enum SplitError {
 
 /// Splits every element that `plane` crosses (see the module docs).
 pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<SplitReport, SplitError> {
-    split(mesh, plane, None, opts)
+    split(mesh, plane, None, &[], opts)
 }
 
 /// Splits those of `elements` that `plane` crosses, and repairs the
@@ -163,7 +163,7 @@ pub fn split_elements_by_plane(
     elements: &[u32],
     opts: &SplitOptions,
 ) -> Result<SplitReport, SplitError> {
-    split(mesh, plane, Some(elements), opts)
+    split(mesh, plane, Some(elements), &[], opts)
 }
 
 /// How `plane` would split every element of `mesh` it crosses, without
@@ -173,7 +173,7 @@ pub(crate) fn classify_split(
     plane: &Plane,
     opts: &SplitOptions,
 ) -> Result<Classification, SplitError> {
-    classify(mesh, plane, None, opts)
+    classify(mesh, plane, None, &[], opts)
 }
 
 /// How a plane meets a mesh, decided before anything changes.
@@ -218,6 +218,7 @@ pub(crate) fn classify(
     mesh: &PolyMesh,
     plane: &Plane,
     only: Option<&[u32]>,
+    keep_whole: &[u32],
     opts: &SplitOptions,
 ) -> Result<Classification, SplitError> {
     let len = norm(plane.normal);
@@ -267,13 +268,18 @@ pub(crate) fn classify(
         let nodes = &mesh.elements[e].nodes;
         nodes.iter().any(|&v| side[v as usize] > 0) && nodes.iter().any(|&v| side[v as usize] < 0)
     };
-    let candidates: Vec<usize> = straddling.iter().copied().filter(|&e| chosen[e] && has_both(e)).collect();
-    let mut keep: HashMap<usize, bool> =
-        candidates.iter().map(|&e| (e, !split_is_healthy(mesh, e, &dist, &side, plane, opts))).collect();
+    let protected = |e: usize| keep_whole.binary_search(&(e as u32)).is_ok();
+    // every element with nodes on both sides is split, or kept whole: when
+    // not chosen, protected or unhealthy once split
+    let both: Vec<usize> = straddling.iter().copied().filter(|&e| has_both(e)).collect();
+    let mut keep: HashMap<usize, bool> = both
+        .iter()
+        .map(|&e| (e, !chosen[e] || protected(e) || !split_is_healthy(mesh, e, &dist, &side, plane, opts)))
+        .collect();
     // the elements on each crossed edge (every element holding an edge with
-    // ends on opposite sides is a candidate)
+    // ends on opposite sides has nodes on both sides)
     let mut edge_users: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
-    for &e in &candidates {
+    for &e in &both {
         for r in &mesh.elements[e].faces {
             let v = &mesh.faces[r.face as usize].vertices;
             for i in 0..v.len() {
@@ -288,9 +294,10 @@ pub(crate) fn classify(
         }
     }
     // an element kept whole receives the new nodes on its edges that split
-    // neighbours make; where one would come too close to its nodes, every
-    // element on that edge is kept whole (until nothing changes)
-    let mut kept: Vec<usize> = candidates.iter().copied().filter(|e| keep[e]).collect();
+    // neighbours make; where one would come too close to its nodes (or the
+    // element is protected), every element on that edge is kept whole
+    // (until nothing changes)
+    let mut kept: Vec<usize> = both.iter().copied().filter(|e| keep[e]).collect();
     let mut k = 0;
     while k < kept.len() {
         let e = kept[k];
@@ -317,7 +324,7 @@ pub(crate) fn classify(
         for (g, key) in gained.iter().enumerate() {
             let p = points[own + g];
             let close = points.iter().enumerate().any(|(j, &q)| j != own + g && norm(sub(p, q)) < limit);
-            if close {
+            if close || protected(e) {
                 for &o in &edge_users[key] {
                     if !keep[&o] {
                         keep.insert(o, true);
@@ -327,7 +334,8 @@ pub(crate) fn classify(
             }
         }
     }
-    let (mut kept_whole, crossed): (Vec<usize>, Vec<usize>) = candidates.iter().partition(|e| keep[e]);
+    let (mut kept_whole, crossed): (Vec<usize>, Vec<usize>) =
+        both.iter().filter(|&&e| chosen[e]).partition(|e| keep[e]);
     kept_whole.sort_unstable();
     Ok(Classification { dist, side, straddling, crossed, kept_whole, on_plane })
 }
@@ -546,13 +554,18 @@ fn cap_pieces(points: &[[f64; 3]], plane: &Plane) -> Vec<Vec<usize>> {
     pieces
 }
 
-fn split(
+/// Splits `only` those elements (all if `None`) that `plane` crosses,
+/// leaving the sorted `keep_whole` elements as they are: not split and
+/// given no new node (the elements on their crossed edges stay whole too).
+pub(crate) fn split(
     mesh: &mut PolyMesh,
     plane: &Plane,
     only: Option<&[u32]>,
+    keep_whole: &[u32],
     opts: &SplitOptions,
 ) -> Result<SplitReport, SplitError> {
-    let Classification { dist, side, straddling, crossed, kept_whole, on_plane } = classify(mesh, plane, only, opts)?;
+    let Classification { dist, side, straddling, crossed, kept_whole, on_plane } =
+        classify(mesh, plane, only, keep_whole, opts)?;
     let mut report =
         SplitReport { kept_whole: kept_whole.iter().map(|&e| e as u32).collect(), on_plane, ..Default::default() };
     if crossed.is_empty() {

@@ -10,6 +10,11 @@ use cleave::store::BasisOptions;
 use cleave::topology::Plane;
 use proptest::prelude::*;
 
+/// The path of a file in `assets/`.
+pub fn asset(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets").join(name)
+}
+
 /// The linear field of the patch tests, `u(x) = d + G x` (m).
 pub fn linear_field(x: [f64; 3]) -> [f64; 3] {
     const G: [[f64; 3]; 3] = [[1e-3, 2e-3, -1e-3], [-2e-3, 5e-4, 3e-3], [1e-3, -1e-3, 2e-3]];
