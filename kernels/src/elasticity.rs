@@ -12,6 +12,8 @@
 //! which is exactly `w B_a^T C B_b` with the 6x6 Voigt matrix `C` of
 //! [`voigt_matrix`]; a test checks the two against each other.
 
+use crate::lanes::Lanes;
+
 /// Lamé parameters `(λ, μ)` in Pa from Young's modulus `E` (Pa) and Poisson's
 /// ratio `ν` (dimensionless, `-1 < ν < 1/2`).
 #[inline]
@@ -49,10 +51,18 @@ pub fn add_block(block: &mut [f64; 9], ga: [f64; 3], gb: [f64; 3], w: f64, lambd
     }
 }
 
+/// Scratch values [`element_stiffness`] and its scalar reference need for
+/// `k` nodes and `nq` quadrature points: the Gram matrix (`9 k²`) and the
+/// gradient table transposed to point-major order (`3 k nq`).
+pub fn stiffness_scratch_len(k: usize, nq: usize) -> usize {
+    9 * k * k + 3 * k * nq
+}
+
 /// Checks the layout of a stiffness computation; panics on a caller bug.
-fn check_table(grad: &[f64], weights: &[f64], k: usize, ke: &[f64]) {
+fn check_table(grad: &[f64], weights: &[f64], k: usize, scratch: &[f64], ke: &[f64]) {
     assert_eq!(grad.len(), 3 * k * weights.len(), "grad must hold 3 k Q values");
     assert_eq!(ke.len(), 9 * k * k, "ke must be 3k x 3k");
+    assert!(scratch.len() >= stiffness_scratch_len(k, weights.len()), "scratch too small");
 }
 
 /// `K_e` from the Gram matrix `S[r][c] = Σ_q w_q G[r][q] G[c][q]`
@@ -62,7 +72,7 @@ fn stiffness_from_gram(s: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]
     let n = 3 * k;
     for a in 0..k {
         for b in 0..k {
-            let tr = (0..3).map(|l| s[(3 * a + l) * n + 3 * b + l]).sum::<f64>();
+            let tr = s[(3 * a) * n + 3 * b] + s[(3 * a + 1) * n + 3 * b + 1] + s[(3 * a + 2) * n + 3 * b + 2];
             for i in 0..3 {
                 for j in 0..3 {
                     let v = lambda * s[(3 * a + i) * n + 3 * b + j] + mu * s[(3 * a + j) * n + 3 * b + i];
@@ -79,22 +89,29 @@ fn stiffness_from_gram(s: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]
 /// Layout: `grad[(3a + i) Q + q]` is component `i` of `∇φ_a` at point `q`
 /// (1/m), `weights[q]` its weight (m^3), `ke` the dense row-major
 /// `3k x 3k` result (entry `(3a + i, 3b + j)` at `(3a + i) 3k + 3b + j`),
-/// `gram` scratch of `9 k^2` values.
+/// `scratch` at least [`stiffness_scratch_len`] values. Each Gram entry is
+/// the sum `Σ_q (w_q G[r][q]) G[c][q]` taken in increasing `q` from zero,
+/// without fused multiply-adds: the SIMD path sums each entry in one lane
+/// in the same order, so both agree to the bit on every instruction set.
 pub fn element_stiffness_scalar(
     grad: &[f64],
     weights: &[f64],
     k: usize,
     lambda: f64,
     mu: f64,
-    gram: &mut [f64],
+    scratch: &mut [f64],
     ke: &mut [f64],
 ) {
-    check_table(grad, weights, k, ke);
+    check_table(grad, weights, k, scratch, ke);
     let (n, nq) = (3 * k, weights.len());
+    let gram = &mut scratch[..n * n];
     for r in 0..n {
         for c in r..n {
             let (gr, gc) = (&grad[r * nq..(r + 1) * nq], &grad[c * nq..(c + 1) * nq]);
-            let v: f64 = (0..nq).map(|q| weights[q] * gr[q] * gc[q]).sum();
+            let mut v = 0.0;
+            for q in 0..nq {
+                v += weights[q] * gr[q] * gc[q];
+            }
             gram[r * n + c] = v;
             gram[c * n + r] = v;
         }
@@ -102,9 +119,14 @@ pub fn element_stiffness_scalar(
     stiffness_from_gram(gram, k, lambda, mu, ke);
 }
 
+/// The Gram matrix with lanes over its columns: row `r` of `S` gathers
+/// `Σ_q a_q G_t[q][c..c + W]` with `a_q = w_q G[r][q]`, one column per lane.
 struct Gram<'a> {
-    grad: &'a [f64],
     weights: &'a [f64],
+    /// The gradient table in its own (row-major `n x nq`) order.
+    grad: &'a [f64],
+    /// The same table point-major, `nq x n`.
+    transposed: &'a [f64],
     n: usize,
     gram: &'a mut [f64],
 }
@@ -113,43 +135,55 @@ impl pulp::WithSimd for Gram<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, simd: S) {
-        let Gram { grad, weights, n, gram } = self;
+        let Gram { weights, grad, transposed, n, gram } = self;
         let nq = weights.len();
-        let (w_head, w_tail) = S::as_simd_f64s(weights);
+        let width = Lanes::<S>::WIDTH;
         for r in 0..n {
-            let (a_head, a_tail) = S::as_simd_f64s(&grad[r * nq..(r + 1) * nq]);
-            for c in r..n {
-                let (b_head, b_tail) = S::as_simd_f64s(&grad[c * nq..(c + 1) * nq]);
-                let mut acc = simd.splat_f64s(0.0);
-                for ((w, a), b) in w_head.iter().zip(a_head).zip(b_head) {
-                    acc = simd.mul_add_e_f64s(simd.mul_f64s(*w, *a), *b, acc);
+            let gr = &grad[r * nq..(r + 1) * nq];
+            let mut c0 = r;
+            while c0 < n {
+                let lanes = width.min(n - c0);
+                let mut acc = Lanes::splat(simd, 0.0);
+                for q in 0..nq {
+                    let a = Lanes::splat(simd, weights[q] * gr[q]);
+                    let row = &transposed[q * n + c0..q * n + c0 + lanes];
+                    acc = acc + a * Lanes::load(simd, row);
                 }
-                let mut v = simd.reduce_sum_f64s(acc);
-                for ((w, a), b) in w_tail.iter().zip(a_tail).zip(b_tail) {
-                    v += w * a * b;
-                }
-                gram[r * n + c] = v;
-                gram[c * n + r] = v;
+                acc.store(&mut gram[r * n + c0..r * n + c0 + lanes]);
+                c0 += lanes;
+            }
+        }
+        for r in 0..n {
+            for c in 0..r {
+                gram[r * n + c] = gram[c * n + r];
             }
         }
     }
 }
 
 /// Element stiffness from a gradient table (see
-/// [`element_stiffness_scalar`] for the layout), SIMD over quadrature points
-/// with the instruction set chosen at run time.
+/// [`element_stiffness_scalar`] for the layout and the summation order),
+/// SIMD over the columns of the Gram matrix with the instruction set chosen
+/// at run time; bitwise equal to the scalar reference.
 pub fn element_stiffness(
     grad: &[f64],
     weights: &[f64],
     k: usize,
     lambda: f64,
     mu: f64,
-    gram: &mut [f64],
+    scratch: &mut [f64],
     ke: &mut [f64],
 ) {
-    check_table(grad, weights, k, ke);
-    assert_eq!(gram.len(), 9 * k * k, "gram scratch must be 3k x 3k");
-    pulp::Arch::new().dispatch(Gram { grad, weights, n: 3 * k, gram });
+    check_table(grad, weights, k, scratch, ke);
+    let (n, nq) = (3 * k, weights.len());
+    let (gram, transposed) = scratch.split_at_mut(n * n);
+    let transposed = &mut transposed[..n * nq];
+    for r in 0..n {
+        for q in 0..nq {
+            transposed[q * n + r] = grad[r * nq + q];
+        }
+    }
+    pulp::Arch::new().dispatch(Gram { weights, grad, transposed, n, gram });
     stiffness_from_gram(gram, k, lambda, mu, ke);
 }
 
@@ -210,16 +244,31 @@ mod tests {
     }
 
     #[test]
-    fn simd_stiffness_matches_scalar_and_block_formula() {
+    fn simd_stiffness_matches_scalar_bitwise_and_the_block_formula() {
         let (l, m) = lame(3e5, 0.31);
         let (k, nq) = (5, 7);
-        let grad: Vec<f64> = (0..3 * k * nq).map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0).collect();
+        let grad: Vec<f64> = (0..3 * k * nq).map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0 + 1e-3 * i as f64).collect();
         let weights: Vec<f64> = (0..nq).map(|q| 0.1 + q as f64 * 0.03).collect();
-        let (mut gram, mut a, mut b) = (vec![0.0; 9 * k * k], vec![0.0; 9 * k * k], vec![0.0; 9 * k * k]);
-        element_stiffness_scalar(&grad, &weights, k, l, m, &mut gram, &mut a);
-        element_stiffness(&grad, &weights, k, l, m, &mut gram, &mut b);
-        for (x, y) in a.iter().zip(&b) {
-            assert!((x - y).abs() <= 1e-13 * x.abs().max(1e3), "{x} vs {y}");
+        let mut scratch = vec![0.0; stiffness_scratch_len(k, nq)];
+        let (mut a, mut b) = (vec![0.0; 9 * k * k], vec![0.0; 9 * k * k]);
+        element_stiffness_scalar(&grad, &weights, k, l, m, &mut scratch, &mut a);
+        element_stiffness(&grad, &weights, k, l, m, &mut scratch, &mut b);
+        assert_eq!(a, b, "the dispatched path");
+        // every instruction set, forced
+        let n = 3 * k;
+        let mut transposed = vec![0.0; n * nq];
+        for r in 0..n {
+            for q in 0..nq {
+                transposed[q * n + r] = grad[r * nq + q];
+            }
+        }
+        for level in crate::lanes::levels::available("stiffness") {
+            let mut gram = vec![0.0; n * n];
+            let op = Gram { weights: &weights, grad: &grad, transposed: &transposed, n, gram: &mut gram };
+            crate::lanes::levels::run(level, op);
+            let mut c = vec![0.0; n * n];
+            stiffness_from_gram(&gram, k, l, m, &mut c);
+            assert_eq!(a, c, "{level:?}");
         }
         // against the block formula, point by point
         let n = 3 * k;

@@ -5,8 +5,10 @@
 //! A kernel written once against [`Real`] runs as the scalar reference
 //! (`f64`) and as the fast path ([`Lanes`]). Both use the same arithmetic in
 //! the same order (no fused multiply-add, one `atan` polynomial accurate to
-//! 4e-16 against `std`), so they agree to rounding of the lane plumbing:
-//! results do not depend on the instruction set the machine offers.
+//! 4e-16 against `std` for both, every sum taken within one lane), so they
+//! agree to the bit: results do not depend on the instruction set the
+//! machine offers. Every kernel's test forces each level this machine has
+//! (scalar, AVX2, AVX-512) and compares bits.
 
 use core::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -105,8 +107,8 @@ impl Real for f64 {
 /// A pack of `f64` lanes of the SIMD instruction set `S`.
 ///
 /// `mul_add` is deliberately not fused: every lane then rounds exactly like
-/// the scalar `f64` reference, so results agree across AVX-512, AVX2 and the
-/// scalar fallback up to the `atan` polynomial (a few ulp).
+/// the scalar `f64` reference, so results agree to the bit across AVX-512,
+/// AVX2 and the scalar fallback.
 #[derive(Clone, Copy, Debug)]
 pub struct Lanes<S: Simd> {
     /// The lanes.
@@ -368,6 +370,64 @@ impl<R: Real> Real for Dual<R> {
         let inv = self.v.constant(1.0) / (x.v * x.v + self.v * self.v);
         let (a, b) = (x.v * inv, self.v * inv);
         Dual { v, d: [a * self.d[0] - b * x.d[0], a * self.d[1] - b * x.d[1], a * self.d[2] - b * x.d[2]] }
+    }
+}
+
+/// Running a kernel on every instruction set this machine offers, for the
+/// tests that hold each kernel's SIMD path bitwise equal to its scalar
+/// reference.
+#[cfg(test)]
+pub(crate) mod levels {
+    /// An instruction set a kernel can run on.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub(crate) enum Level {
+        /// Plain `f64`, one lane.
+        Scalar,
+        /// x86-64-v3: AVX2 (4 lanes).
+        V3,
+        /// x86-64-v4: AVX-512 (8 lanes).
+        V4,
+    }
+
+    /// The levels this machine runs; prints them, so that a test's output
+    /// says which ran (a missing one is named, not silently skipped).
+    pub(crate) fn available(test: &str) -> Vec<Level> {
+        let mut out = vec![Level::Scalar];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if pulp::x86::V3::try_new().is_some() {
+                out.push(Level::V3);
+            }
+            if pulp::x86::V4::try_new().is_some() {
+                out.push(Level::V4);
+            }
+        }
+        let missing: Vec<&str> = [(Level::V3, "V3 (AVX2)"), (Level::V4, "V4 (AVX-512)")]
+            .iter()
+            .filter(|(l, _)| !out.contains(l))
+            .map(|(_, n)| *n)
+            .collect();
+        println!("{test}: ran on {out:?}; not on this machine: {missing:?}");
+        out
+    }
+
+    /// Runs `op` with the instruction set `level`.
+    pub(crate) fn run<Op: pulp::WithSimd>(level: Level, op: Op) -> Op::Output {
+        match level {
+            Level::Scalar => op.with_simd(pulp::Scalar::new()),
+            #[cfg(target_arch = "x86_64")]
+            Level::V3 => {
+                let simd = pulp::x86::V3::try_new().expect("V3 is available");
+                simd.vectorize(|| op.with_simd(simd))
+            }
+            #[cfg(target_arch = "x86_64")]
+            Level::V4 => {
+                let simd = pulp::x86::V4::try_new().expect("V4 is available");
+                simd.vectorize(|| op.with_simd(simd))
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => unreachable!("only scalar runs off x86-64"),
+        }
     }
 }
 

@@ -212,12 +212,25 @@ mod tests {
             (quat(3.0, [0.0, 0.0, 1.0]), [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
             (quat(0.4, [-1.0, 0.3, 0.2]), [2.0, 0.3, 0.1, 0.3, 0.5, 0.0, 0.1, 0.0, 0.9]),
         ];
-        let f: Vec<[f64; 9]> = cases.iter().map(|(q, s)| mat_mul(rotation_matrix(*q), *s)).collect();
+        let mut f: Vec<[f64; 9]> = cases.iter().map(|(q, s)| mat_mul(rotation_matrix(*q), *s)).collect();
+        // more elements than any lane width, with different iteration counts
+        for i in 0..21 {
+            let t = i as f64;
+            f.push(mat_mul(
+                rotation_matrix(quat(0.15 * t, [t.sin(), 1.0, t.cos()])),
+                [1.0 + 0.01 * t, 0.1, 0.0, 0.0, 0.9, 0.05 * t.sin(), 0.02, 0.0, 1.1],
+            ));
+        }
         let mut qs = vec![[1.0, 0.0, 0.0, 0.0]; f.len()];
-        let mut qv = qs.clone();
         polar_rotations_scalar(&f, &mut qs);
+        for level in crate::lanes::levels::available("rotation") {
+            let mut qv = vec![[1.0, 0.0, 0.0, 0.0]; f.len()];
+            crate::lanes::levels::run(level, Polar { f: &f, q: &mut qv });
+            assert_eq!(qs, qv, "{level:?}: SIMD and scalar agree bitwise");
+        }
+        let mut qv = vec![[1.0, 0.0, 0.0, 0.0]; f.len()];
         polar_rotations(&f, &mut qv);
-        assert_eq!(qs, qv, "SIMD and scalar agree bitwise");
+        assert_eq!(qs, qv, "the dispatched path");
         for ((want, _), got) in cases.iter().zip(&qs) {
             let (a, b) = (rotation_matrix(*want), rotation_matrix(*got));
             for i in 0..9 {

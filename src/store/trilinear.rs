@@ -106,7 +106,7 @@ pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u3
     let (lambda, mu) = material.lame();
     let (k, nq) = (8, 8);
     let (g, gw) = gauss_legendre(2);
-    let scratch = || (vec![0.0; 3 * k * nq], vec![0.0; 9 * k * k]);
+    let scratch = || (vec![0.0; 3 * k * nq], vec![0.0; elasticity::stiffness_scratch_len(k, nq)]);
     fill_batch(mesh, material, ElementKind::Trilinear, k, nq, elements, false, scratch, |(grad, gram), slot| {
         let Slots { element, verts, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
         let corners = hex_corners(mesh, element)

@@ -144,7 +144,7 @@ pub(super) fn build_batch(
     let scratch = || Scratch {
         phi: vec![0.0; k * nq],
         grad: vec![0.0; 3 * k * nq],
-        gram: vec![0.0; 9 * k * k],
+        gram: vec![0.0; elasticity::stiffness_scratch_len(k, nq)],
         moments: vec![[0.0; 3]; k],
         points: Vec::with_capacity(nq),
         weights: Vec::with_capacity(nq),
