@@ -138,3 +138,50 @@ pub fn rates_and_limit(w: &[f64]) -> (Vec<f64>, f64) {
     let p = rates[rates.len() - 1];
     (rates, w[w.len() - 1] + d[d.len() - 1] / (2f64.powf(p) - 1.0))
 }
+
+/// What [`spectra`] found over the elements of a store.
+#[derive(Clone, Copy, Debug)]
+pub struct SpectrumSummary {
+    /// Elements checked.
+    pub elements: usize,
+    /// Smallest `λ7 / λmax`.
+    pub worst_ratio: f64,
+    /// Largest asymmetry `|K - Kᵀ| / max |K|`.
+    pub asymmetry: f64,
+}
+
+/// Checks every element stiffness of `store` by a full eigendecomposition
+/// (faer, independent of the store's own estimate): symmetric to `1e-12`
+/// of its largest entry, exactly six eigenvalues within `1e-10 λmax` of
+/// zero (the rigid modes), none below `-1e-12 λmax`, and `λ7 / λmax` of at
+/// least `floor`. Panics naming the element otherwise.
+pub fn spectra(store: &cleave::store::ElementStore, floor: f64) -> SpectrumSummary {
+    use faer::{Mat, Side};
+    let mut out = SpectrumSummary { elements: 0, worst_ratio: f64::INFINITY, asymmetry: 0.0 };
+    for b in &store.batches {
+        let n = 3 * b.k;
+        for i in 0..b.len() {
+            let e = b.elements[i];
+            let ke = b.element_matrix(i);
+            let scale = ke.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            for r in 0..n {
+                for c in 0..r {
+                    out.asymmetry = out.asymmetry.max((ke[r * n + c] - ke[c * n + r]).abs() / scale);
+                }
+            }
+            let ev = Mat::<f64>::from_fn(n, n, |r, c| 0.5 * (ke[r * n + c] + ke[c * n + r]))
+                .self_adjoint_eigenvalues(Side::Lower)
+                .unwrap();
+            let top = ev[n - 1];
+            let zeros = ev.iter().filter(|l| l.abs() <= 1e-10 * top).count();
+            let ratio = ev[6] / top;
+            assert_eq!(zeros, 6, "element {e} ({:?}, {} nodes): {zeros} zero modes, λ7/λmax {ratio:.2e}", b.kind, b.k);
+            assert!(ev[0] >= -1e-12 * top, "element {e} ({:?}): eigenvalue {:.3e} of {top:.3e}", b.kind, ev[0]);
+            assert!(ratio >= floor, "element {e} ({:?}, {} nodes): λ7/λmax {ratio:.2e} < {floor:.0e}", b.kind, b.k);
+            out.worst_ratio = out.worst_ratio.min(ratio);
+            out.elements += 1;
+        }
+    }
+    assert!(out.asymmetry <= 1e-12, "asymmetry {:.2e}", out.asymmetry);
+    out
+}
