@@ -9,29 +9,31 @@ use cleave::sim::{Collider, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
 use cleave::topology::Plane;
 
-fn rotate(axis: usize, angle: f64, p: [f64; 3]) -> [f64; 3] {
+mod common;
+
+/// `p` rotated by `angle` (rad) about the unit `axis` through the origin
+/// (Rodrigues).
+fn rotate(axis: [f64; 3], angle: f64, p: [f64; 3]) -> [f64; 3] {
     let (s, c) = angle.sin_cos();
-    let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
-    let mut q = p;
-    q[i] = c * p[i] - s * p[j];
-    q[j] = s * p[i] + c * p[j];
-    q
+    let d = axis[0] * p[0] + axis[1] * p[1] + axis[2] * p[2];
+    let x = [axis[1] * p[2] - axis[2] * p[1], axis[2] * p[0] - axis[0] * p[2], axis[0] * p[1] - axis[1] * p[0]];
+    std::array::from_fn(|i| p[i] * c + x[i] * s + axis[i] * d * (1.0 - c))
 }
 
 fn params(corotated: bool) -> SimulationParams {
     SimulationParams { material: Material::new(1e5, 0.3, 1000.0).unwrap(), corotated, ..Default::default() }
 }
 
-/// Largest nodal elastic force after rotating the body rigidly by 90°
+/// Largest nodal elastic force after rotating the body rigidly by `angle`
 /// about `axis`, relative to its weight.
-fn ghost_force(mesh: PolyMesh, axis: usize, corotated: bool) -> f64 {
+fn ghost_force(mesh: PolyMesh, axis: [f64; 3], angle: f64, corotated: bool) -> f64 {
     let mut sim = Simulation::new(mesh, params(corotated)).unwrap();
     let u: Vec<[f64; 3]> = sim
         .mesh()
         .nodes
         .iter()
         .map(|&x| {
-            let y = rotate(axis, std::f64::consts::FRAC_PI_2, x);
+            let y = rotate(axis, angle, x);
             [y[0] - x[0], y[1] - x[1], y[2] - x[2]]
         })
         .collect();
@@ -41,19 +43,32 @@ fn ghost_force(mesh: PolyMesh, axis: usize, corotated: bool) -> f64 {
     f.iter().map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, f64::max) / weight
 }
 
+/// Rigid rotations about random axes by random angles up to a half turn
+/// leave no elastic force with warping (measured up to 1e-14 of the
+/// weight: rounding of the rotation extraction), where plain linear
+/// elasticity pushes with forces comparable to the weight.
 #[test]
 fn rigid_rotation_carries_no_elastic_force() {
-    for mesh in
+    let mut worst: f64 = 0.0;
+    for (m, mesh) in
         [box_tet([0.0; 3], [2.0, 1.0, 0.5], [4, 2, 2]).unwrap(), random_convex([0.0; 3], [1.0; 3], 6, 4).unwrap()]
+            .into_iter()
+            .enumerate()
     {
-        for axis in 0..3 {
-            let warped = ghost_force(mesh.clone(), axis, true);
-            let linear = ghost_force(mesh.clone(), axis, false);
-            println!("axis {axis}: corotated {warped:.2e}, linear {linear:.2e} of the weight");
-            assert!(warped < 1e-10, "ghost force {warped:e}");
-            assert!(linear > 1.0, "linear elasticity must show ghost forces: {linear}");
+        for r in 0..8 {
+            let t = (m * 8 + r) as f64;
+            let axis = [(t * 1.3).sin(), (t * 2.9).cos(), 0.4 + (t * 0.7).sin()];
+            let len = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+            let axis = axis.map(|x| x / len);
+            let angle = 0.3 + 2.8 * ((t * 3.7).sin() * 0.5 + 0.5);
+            let warped = ghost_force(mesh.clone(), axis, angle, true);
+            let linear = ghost_force(mesh.clone(), axis, angle, false);
+            worst = worst.max(warped);
+            assert!(linear > 0.1, "linear elasticity must show ghost forces: {linear}");
         }
     }
+    println!("largest ghost force with warping: {worst:.2e} of the weight");
+    assert!(worst < 1e-13, "ghost force {worst:e}");
 }
 
 #[test]
@@ -75,10 +90,11 @@ fn free_flight_conserves_linear_momentum() {
     for i in 0..3 {
         assert!((p1[i] - p0[i]).abs() < 1e-10 * scale_p, "linear momentum {p0:?} -> {p1:?}");
     }
-    // implicit Euler damps the spin: allow 10 % over 1 s of flight
+    // implicit Euler damps the spin, by little at this step (measured
+    // 2.9e-5 over 1 s of flight)
     let drift = (0..3).map(|i| (l1[i] - l0[i]).abs()).fold(0.0, f64::max) / scale_l;
     println!("angular momentum drift after 200 steps: {drift:.3e}");
-    assert!(drift < 0.1, "angular momentum drift {drift}");
+    assert!(drift < 5e-5, "angular momentum drift {drift}");
 }
 
 #[test]
@@ -107,7 +123,9 @@ fn dropped_cube_comes_to_rest_above_the_plane() {
     println!("deepest penetration {deepest:.3e} m (bound {impact:.3e}), at rest {final_depth:.3e} m (bound {resting:.3e}), kinetic energy {:.3e} J", sim.kinetic_energy());
     assert!(deepest < impact, "penetration {deepest}");
     assert!(final_depth < resting, "resting penetration {final_depth}");
-    assert!(sim.kinetic_energy() < 1e-6 * weight, "comes to rest");
+    // at rest: the kinetic energy is a negligible part of the energy the
+    // drop released, M g h with h = 0.3 m (measured 2.3e-8 of it)
+    assert!(sim.kinetic_energy() < 1e-7 * weight * 0.3, "comes to rest: {} J", sim.kinetic_energy());
 }
 
 #[test]
@@ -150,30 +168,42 @@ fn rotated_rest_preconditioner_needs_few_iterations_under_rotation() {
     assert!(rest < jacobi / 2, "{rest} vs {jacobi}");
 }
 
+/// The bunny (2,153 nodes, 6,907 elements: above every parallel grain
+/// size of the rotations, the assembly, the pattern and CG) falls, is cut
+/// by a plane and a polygon, and lands; positions, velocities and stresses
+/// after 40 steps are the same bits on 1, 2 and 4 threads, with either
+/// solver.
 #[test]
 fn trajectories_are_bitwise_independent_of_the_thread_count() {
+    let mut bunny = cleave::io::read_mesh(&common::asset("bunny_5k.mesh")).unwrap();
+    cleave::topology::merge_slivers(&mut bunny, 0.02).unwrap();
     for solver in [SolverKind::Cholesky, SolverKind::Cg] {
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| {
-                let mesh = random_convex([0.0, 0.0, 0.2], [1.0, 1.0, 1.2], 6, 3).unwrap();
-                let mut sim = Simulation::new(mesh, SimulationParams { solver, ..params(true) }).unwrap();
-                sim.add_collider(Collider::new([0.0; 3], [0.1, 0.0, 1.0], 1e6).unwrap());
-                for step in 0..100 {
+                let p = SimulationParams { solver, gravity: [0.0, -9.81, 0.0], ..params(true) };
+                let mut sim = Simulation::new(bunny.clone(), p).unwrap();
+                sim.add_collider(Collider::new([0.0, -0.1, 0.0], [0.0, 1.0, 0.0], 1e7).unwrap());
+                sim.set_velocities(&vec![[0.0, -3.0, 0.5]; sim.mesh().nodes.len()]).unwrap();
+                for step in 0..40 {
                     // cuts rebuild part of the system in place: that too
                     // must not depend on the threads
-                    if step == 40 {
-                        let cut = sim.cut_plane(&Plane { point: [0.5, 0.5, 0.7], normal: [1.0, 0.2, 0.1] }).unwrap();
+                    if step == 10 {
+                        let cut = sim.cut_plane(&Plane { point: [0.0, 6.0, 0.0], normal: [0.2, 1.0, 0.3] }).unwrap();
                         assert!(!cut.split.split_elements.is_empty());
                     }
-                    if step == 60 {
-                        let blade = [[0.2, 0.3, -0.1], [0.2, 0.3, 0.9], [0.2, 0.9, 0.9], [0.2, 0.9, -0.1]];
+                    if step == 20 {
+                        let blade = [[-1.5, 1.5, -4.5], [-1.5, 5.5, -4.5], [-1.5, 5.5, 0.0], [-1.5, 1.5, 0.0]];
                         assert!(!sim.cut_polygon(&blade).unwrap().cut.touched.is_empty());
                     }
                     sim.step().unwrap();
                 }
-                sim.displacements().iter().flatten().map(|v| v.to_bits()).collect::<Vec<u64>>()
+                let bits = |v: &[[f64; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<u64>>();
+                let stress: Vec<u64> = sim.von_mises().iter().map(|x| x.to_bits()).collect();
+                (bits(sim.positions()), bits(sim.velocities()), stress)
             })
         };
-        assert_eq!(run(1), run(2), "{solver:?}");
+        let one = run(1);
+        assert_eq!(one, run(2), "{solver:?}, 2 threads");
+        assert_eq!(one, run(4), "{solver:?}, 4 threads");
     }
 }
