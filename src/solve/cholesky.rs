@@ -146,6 +146,12 @@ fn nested_dissection(pattern: SymbolicSparseColMatRef<'_, usize>) -> Option<(Vec
     let mut perm = vec![0 as metis_sys::idx_t; nb];
     let mut iperm = vec![0 as metis_sys::idx_t; nb];
     let mut options = [0 as metis_sys::idx_t; metis_sys::METIS_NOPTIONS as usize];
+    // METIS draws from one random number generator for the whole process
+    // (GKlib's), seeded at each call: two calls at once (two simulations on
+    // two threads) would interleave its draws and order differently, so one
+    // call runs at a time and every ordering is reproducible
+    static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = METIS.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     // SAFETY: the arrays have the lengths METIS_NodeND documents (nvtxs + 1,
     // xadj[nvtxs], nvtxs, nvtxs, METIS_NOPTIONS) and live across the calls;
     // a null vwgt means unit weights.
