@@ -1,7 +1,7 @@
 //! Harmonic (MFS) shape functions on single elements: partition of unity,
 //! linear reproduction, the Lagrange property, gradients against finite
-//! differences, the boundary fit error, and the cube against the trilinear
-//! hexahedron.
+//! differences, the boundary fit error at and away from the collocation
+//! points, and the cube against the trilinear hexahedron.
 
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{clipped_box, prism};
@@ -85,6 +85,56 @@ fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Re
     Ok(lagrange)
 }
 
+/// The error of the element's functions against their boundary values at
+/// points that are not collocation points: a face grid of a spacing the fit
+/// does not use (the faces' own functions give the targets there; nodes
+/// off a face are 0 on it), and points at odd fractions of every edge
+/// (where the targets are linear). Returns the RMS and the largest error.
+fn off_collocation_error(mesh: &PolyMesh, b: &ElementBasis, options: &HarmonicOptions) -> (f64, f64) {
+    let faces = face_bases(mesh, &[0], options).unwrap();
+    let el = &mesh.elements[0];
+    let k = el.nodes.len();
+    let h = 0.0917 * mesh.element_diameter(0);
+    let mut points: Vec<[f64; 3]> = Vec::new();
+    let mut targets: Vec<Vec<f64>> = Vec::new();
+    for r in &el.faces {
+        let face = &mesh.faces[r.face as usize];
+        let basis = faces[r.face as usize].as_ref().expect("face basis");
+        basis.interior_samples(&mesh.nodes, face, h, |p, vals| {
+            let mut t = vec![0.0; k];
+            for (j, &v) in face.vertices.iter().enumerate() {
+                t[el.nodes.binary_search(&v).unwrap()] = vals[j];
+            }
+            points.push(p);
+            targets.push(t);
+        });
+        for (j, &a) in face.vertices.iter().enumerate() {
+            let c = face.vertices[(j + 1) % face.vertices.len()];
+            for s in [0.13, 0.41, 0.77] {
+                let (pa, pc) = (mesh.nodes[a as usize], mesh.nodes[c as usize]);
+                points.push(std::array::from_fn(|i| pa[i] + s * (pc[i] - pa[i])));
+                let mut t = vec![0.0; k];
+                t[el.nodes.binary_search(&a).unwrap()] = 1.0 - s;
+                t[el.nodes.binary_search(&c).unwrap()] = s;
+                targets.push(t);
+            }
+        }
+    }
+    let nq = points.len();
+    let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
+    evaluate(&b.functions(), &points, &mut phi, &mut grad);
+    let (mut sum, mut worst, mut count) = (0.0, 0.0f64, 0usize);
+    for (q, t) in targets.iter().enumerate() {
+        for a in 0..k {
+            let e = (phi[a * nq + q] - t[a]).abs();
+            sum += e * e;
+            worst = worst.max(e);
+            count += 1;
+        }
+    }
+    ((sum / count as f64).sqrt(), worst)
+}
+
 /// Bounds of the MFS fit error (not exactness: the boundary values are
 /// fitted in the least-squares sense). martin2008 reports L2 boundary
 /// errors of 2-3 % with 5 samples per edge; with the default 3 we require
@@ -92,6 +142,9 @@ fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Re
 /// hat functions' kinks at corners are where MFS fits worst).
 const MAX_RMS: f64 = 0.03;
 const MAX_LAGRANGE: f64 = 0.25;
+/// Away from the collocation points the error is about the same (measured
+/// up to 3.1 %, on six-tipped stars with thin tips).
+const MAX_RMS_AWAY: f64 = 0.04;
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
@@ -109,6 +162,8 @@ proptest! {
         let (b, pts) = basis(&mesh, &opts);
         let lagrange = check_reproduction(&mesh, &b, &pts)?;
         prop_assert!(lagrange < MAX_LAGRANGE && b.boundary_rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", b.boundary_rms);
+        let (rms, _) = off_collocation_error(&mesh, &b, &opts);
+        prop_assert!(rms < MAX_RMS_AWAY, "rms away from the collocation points {rms:.2e}");
     }
 
     /// Random non-convex prisms: stars with 3 to 6 tips and L shapes, no
@@ -125,10 +180,14 @@ proptest! {
         let (b, pts) = basis(&mesh, &opts);
         let lagrange = check_reproduction(&mesh, &b, &pts)?;
         prop_assert!(lagrange < MAX_LAGRANGE && b.boundary_rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", b.boundary_rms);
+        let (rms, _) = off_collocation_error(&mesh, &b, &opts);
+        prop_assert!(rms < MAX_RMS_AWAY, "star: rms away from the collocation points {rms:.2e}");
         let mesh = prism(&l_shape(r_in, 1.0 - r_in), height).unwrap();
         let (b, pts) = basis(&mesh, &opts);
         let lagrange = check_reproduction(&mesh, &b, &pts)?;
         prop_assert!(lagrange < MAX_LAGRANGE && b.boundary_rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", b.boundary_rms);
+        let (rms, _) = off_collocation_error(&mesh, &b, &opts);
+        prop_assert!(rms < MAX_RMS_AWAY, "L: rms away from the collocation points {rms:.2e}");
     }
 }
 
@@ -141,15 +200,15 @@ fn boundary_error_falls_with_more_kernels() {
         let opts = HarmonicOptions { edge_samples: samples, ..Default::default() };
         let t = std::time::Instant::now();
         let (b, _) = basis(&mesh, &opts);
+        let (rms, max) = off_collocation_error(&mesh, &b, &opts);
         println!(
-            "star prism (k = {}), {samples} samples per edge ({:.2} ms): {} kernels, boundary error rms {:.2e}, max {:.2e}",
+            "star prism (k = {}), {samples} samples per edge ({:.2} ms): {} kernels, error rms {:.2e} at the collocation points, rms {rms:.2e} (max {max:.2e}) away from them",
             b.linear.len(),
             t.elapsed().as_secs_f64() * 1e3,
             b.centres.len(),
             b.boundary_rms,
-            b.boundary_error
         );
-        assert!(b.boundary_rms < last, "{samples} samples: rms {} not below {last}", b.boundary_rms);
-        last = b.boundary_rms;
+        assert!(rms < last, "{samples} samples: rms {rms} not below {last}");
+        last = rms;
     }
 }

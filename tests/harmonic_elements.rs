@@ -1,7 +1,7 @@
 //! Harmonic elements in the store and in simulations: the cube against the
 //! trilinear hexahedron, the patch test on a mesh mixing tetrahedra,
-//! hexahedra, convex and non-convex polyhedra, and cantilever convergence on
-//! non-convex cells.
+//! hexahedra, convex and non-convex polyhedra (cantilever convergence is in
+//! `tests/convergence.rs`).
 
 mod common;
 
@@ -106,24 +106,6 @@ fn patch_test_on_mixed_mesh() {
     let (err, interior) = common::patch_error(mesh, harmonic(true));
     println!("patch test, mixed harmonic mesh: error {err:.2e} over {interior} interior nodes");
     assert!(interior > 0 && err < 1e-9, "{err}");
-}
-
-/// The cantilever on L-prism + hexahedron meshes converges to the limit of
-/// the tetrahedral and mean value runs.
-#[test]
-fn cantilever_on_nonconvex_cells_converges() {
-    let w: Vec<f64> = [2, 4, 8]
-        .iter()
-        .map(|&n| {
-            common::tip_deflection(box_l_prisms([0.0; 3], [4.0, 1.0, 1.0], [4 * n, n, n]).unwrap(), harmonic(true))
-        })
-        .collect();
-    let (rates, limit) = common::rates_and_limit(&w);
-    println!("cantilever, L-prisms + hexahedra: tip {w:.3?} m, rates {rates:.2?}, limit {limit:.2} m");
-    // tetrahedra converge to 39.49 m (tests/cantilever.rs), mean value
-    // polyhedra to 39.36 m
-    assert!(w.windows(2).all(|p| p[1] > p[0]), "monotone from below");
-    assert!((limit - 39.45).abs() < 0.02 * 39.45, "limit {limit}");
 }
 
 /// A single non-convex element (martin2008 Fig. 1): rotated rigidly by 90°

@@ -130,15 +130,6 @@ pub fn tet_sequence() -> Vec<f64> {
         .collect()
 }
 
-/// Observed convergence rates of a sequence on meshes halved each time, and
-/// the Richardson extrapolation of its limit with the last rate.
-pub fn rates_and_limit(w: &[f64]) -> (Vec<f64>, f64) {
-    let d: Vec<f64> = w.windows(2).map(|p| p[1] - p[0]).collect();
-    let rates: Vec<f64> = d.windows(2).map(|q| (q[0] / q[1]).log2()).collect();
-    let p = rates[rates.len() - 1];
-    (rates, w[w.len() - 1] + d[d.len() - 1] / (2f64.powf(p) - 1.0))
-}
-
 /// What [`spectra`] found over the elements of a store.
 #[derive(Clone, Copy, Debug)]
 pub struct SpectrumSummary {
