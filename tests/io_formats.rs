@@ -200,32 +200,33 @@ fn malformed_tetgen_gmsh_vtu_files() {
     assert!(matches!(read_mesh(&d.join("surface.obj")), Err(IoError::Unsupported { .. })));
 }
 
-/// Truncated and corrupted files of every format end in an error (or, by
-/// luck, a valid mesh), never a panic.
+/// Truncated and corrupted files of every format (Medit, gmsh, TetGen's
+/// `.node` and `.ele`, VTU with tetrahedra and polyhedra, OBJ surfaces) end
+/// in an error, never a panic; a corruption that still reads (a digit
+/// changed in a coordinate) is counted and reported, and what it reads is a
+/// mesh of finite nodes.
 #[test]
 fn damaged_files_never_panic() {
     let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
     let (nodes, cells) = tet_cells();
     let mesh = PolyMesh::from_cells(nodes.clone(), &cells).unwrap();
     let poly = random_convex([0.0; 3], [1.0; 3], 3, 1).unwrap();
-    let files = [
-        ("m.mesh", {
-            write_medit(&dir.path().join("m.mesh"), &nodes, &cells).unwrap();
-            dir.path().join("m.mesh")
-        }),
-        ("m.msh", {
-            write_gmsh(&dir.path().join("m.msh"), &nodes, &cells).unwrap();
-            dir.path().join("m.msh")
-        }),
-        ("m.vtu", {
-            write_vtu(&dir.path().join("m.vtu"), &mesh, &mesh.nodes, &VtuFields::default()).unwrap();
-            dir.path().join("m.vtu")
-        }),
-        ("p.vtu", {
-            write_vtu(&dir.path().join("p.vtu"), &poly, &poly.nodes, &VtuFields::default()).unwrap();
-            dir.path().join("p.vtu")
-        }),
-    ];
+    write_medit(&d.join("m.mesh"), &nodes, &cells).unwrap();
+    write_gmsh(&d.join("m.msh"), &nodes, &cells).unwrap();
+    write_tetgen(&d.join("t.node"), &nodes, &cells).unwrap();
+    write_vtu(&d.join("m.vtu"), &mesh, &mesh.nodes, &VtuFields::default()).unwrap();
+    write_vtu(&d.join("p.vtu"), &poly, &poly.nodes, &VtuFields::default()).unwrap();
+    write_boundary_obj(&d.join("s.obj"), &poly, &poly.nodes).unwrap();
+    let read = |p: &Path| -> Result<usize, String> {
+        let nodes = if p.extension().is_some_and(|e| e == "obj") {
+            read_obj_surface(p).map_err(|e| e.to_string())?.vertices
+        } else {
+            read_mesh(p).map_err(|e| e.to_string())?.nodes
+        };
+        assert!(nodes.iter().flatten().all(|x| x.is_finite()), "{}: a non-finite node read as valid", p.display());
+        Ok(nodes.len())
+    };
     let mut seed = 12345u64;
     let mut next = || {
         seed ^= seed << 13;
@@ -233,21 +234,62 @@ fn damaged_files_never_panic() {
         seed ^= seed << 17;
         seed
     };
-    for (name, path) in files {
-        let bytes = std::fs::read(&path).unwrap();
-        for k in 0..40 {
-            let mut damaged = bytes.clone();
+    // (the file to damage, the file to read: a TetGen pair is read by either)
+    let cases = [
+        ("m.mesh", "m.mesh"),
+        ("m.msh", "m.msh"),
+        ("t.node", "t.ele"),
+        ("t.ele", "t.node"),
+        ("m.vtu", "m.vtu"),
+        ("p.vtu", "p.vtu"),
+        ("s.obj", "s.obj"),
+    ];
+    let mut report = Vec::new();
+    for (damage, read_as) in cases {
+        let original = std::fs::read(d.join(damage)).unwrap();
+        let (mut errors, mut readable) = (0, 0);
+        for k in 0..60 {
+            let mut damaged = original.clone();
             if k % 2 == 0 {
-                damaged.truncate((next() as usize) % bytes.len());
+                damaged.truncate((next() as usize) % original.len());
             } else {
                 for _ in 0..3 {
                     let i = (next() as usize) % damaged.len();
                     damaged[i] = b"0123456789 .-eE\nx#"[(next() as usize) % 18];
                 }
             }
-            let p = dir.path().join(format!("d{k}_{name}"));
-            std::fs::write(&p, &damaged).unwrap();
-            let _ = read_mesh(&p); // must return, not panic
+            std::fs::write(d.join(damage), &damaged).unwrap();
+            match read(&d.join(read_as)) {
+                Ok(_) => readable += 1,
+                Err(_) => errors += 1,
+            }
         }
+        std::fs::write(d.join(damage), &original).unwrap();
+        assert!(errors > 0, "{damage}: no damage was noticed");
+        report.push(format!("{damage}: {errors} errors, {readable} still read"));
+    }
+    println!("60 damaged versions of each file: {report:?}");
+}
+
+/// A count in a header that the file's data does not back (10^11 or 10^18
+/// vertices or cells) ends in an error naming the file, before anything
+/// that size is allocated.
+#[test]
+fn huge_counts_in_headers_are_errors_not_aborts() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let medit = "MeshVersionFormatted 2\nDimension 3\nVertices\n99999999999\n0 0 0 1\n1 0 0 1\nEnd\n";
+    std::fs::write(d.join("h.mesh"), medit).unwrap();
+    let medit_cells = "MeshVersionFormatted 2\nDimension 3\nVertices\n4\n0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\nTetrahedra\n1000000000000000000\n1 2 3 4 1\nEnd\n";
+    std::fs::write(d.join("c.mesh"), medit_cells).unwrap();
+    std::fs::write(d.join("h.node"), "1000000000000000000 3 0 0\n1 0 0 0\n").unwrap();
+    std::fs::write(d.join("h.ele"), "1 4 0\n1 1 2 3 4\n").unwrap();
+    std::fs::write(d.join("e.node"), "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n").unwrap();
+    std::fs::write(d.join("e.ele"), "1000000000000000000 4 0\n1 1 2 3 4\n").unwrap();
+    for name in ["h.mesh", "c.mesh", "h.node", "e.ele"] {
+        let err = read_mesh(&d.join(name)).unwrap_err().to_string();
+        println!("{name}: {err}");
+        let file = if name.starts_with('h') && name.ends_with("node") { "h.node" } else { name };
+        assert!(err.contains(file), "names the file: {err}");
     }
 }

@@ -30,7 +30,7 @@ pub fn read_medit(path: &Path) -> Result<PolyMesh, IoError> {
             }
             "vertices" => {
                 let n = t.usize("vertex count")?;
-                nodes.reserve(n);
+                nodes.reserve(t.capacity(n, 4));
                 for _ in 0..n {
                     let p = [t.f64("x")?, t.f64("y")?, t.f64("z")?];
                     t.f64("vertex reference")?;

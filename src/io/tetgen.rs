@@ -21,7 +21,7 @@ pub fn read_tetgen(path: &Path) -> Result<PolyMesh, IoError> {
     }
     let attrs = t.usize("attribute count")?;
     let markers = t.usize("boundary marker flag")?;
-    let mut nodes = Vec::with_capacity(n);
+    let mut nodes = Vec::with_capacity(t.capacity(n, 4));
     let mut base = 0;
     for i in 0..n {
         let id = t.usize("node number")?;
@@ -44,7 +44,7 @@ pub fn read_tetgen(path: &Path) -> Result<PolyMesh, IoError> {
         return Err(t.error(format!("{per} nodes per tetrahedron is not supported (expected 4 or 10)")));
     }
     let attrs = t.usize("region attribute flag")?;
-    let mut cells = Vec::with_capacity(m);
+    let mut cells = Vec::with_capacity(t.capacity(m, 5));
     for _ in 0..m {
         t.usize("tetrahedron number")?;
         let mut v = [0u32; 4];

@@ -24,6 +24,14 @@ impl<'a> Tokens<'a> {
         Tokens { path, items, pos: 0 }
     }
 
+    /// Room to reserve for `count` records of `per` tokens each: no more
+    /// than the tokens left in the file can hold, so a damaged count (a
+    /// header claiming 10^11 vertices) allocates nothing the data does not
+    /// back; a count beyond the data fails when the tokens run out.
+    pub fn capacity(&self, count: usize, per: usize) -> usize {
+        count.min((self.items.len() - self.pos) / per.max(1))
+    }
+
     /// Line of the next token (or of the last one at the end of the file).
     pub fn line(&self) -> usize {
         self.items.get(self.pos).or(self.items.last()).map_or(1, |t| t.0)
