@@ -206,6 +206,23 @@ fn trajectories_are_bitwise_independent_of_the_thread_count() {
         assert_eq!(one, run(2), "{solver:?}, 2 threads");
         assert_eq!(one, run(4), "{solver:?}, 4 threads");
     }
+    // a Cholesky factor large enough for faer to split its dense kernels
+    // and triangular solves across threads (6,144 tetrahedra; the
+    // triangular solves summed in a thread-dependent order until they ran
+    // sequentially)
+    let statics = |threads: usize| {
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| {
+            let mesh = box_tet([0.0; 3], [4.0, 1.0, 1.0], [32, 8, 8]).unwrap();
+            let p = SimulationParams { solver: SolverKind::Cholesky, ..params(true) };
+            let mut sim = Simulation::new(mesh, p).unwrap();
+            sim.fix(cleave::sim::FixedRegion::clamp([-1.0; 3], [1e-3, 2.0, 2.0])).unwrap();
+            sim.solve_static().unwrap();
+            sim.step().unwrap();
+            sim.positions().iter().flatten().map(|x| x.to_bits()).collect::<Vec<u64>>()
+        })
+    };
+    let one = statics(1);
+    assert!(one == statics(2) && one == statics(4), "a large Cholesky solve depends on the thread count");
 }
 
 /// Several simulations running at once on their own threads (sharing the

@@ -40,13 +40,20 @@ impl Cholesky {
 
     /// Overwrites `x` with `A⁻¹ x` for the last factored `A`.
     pub fn solve_in_place(&mut self, x: &mut [f64]) -> Result<(), SolveError> {
-        let par = self.par();
         let (Some(sym), Some(buf), true) = (self.symbolic.as_ref(), self.scratch.as_mut(), self.factored) else {
             return Err(SolveError::NotReady);
         };
         let llt = LltRef::<'_, usize, f64>::new(sym, &self.l_values);
         let n = x.len();
-        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(x, n, 1), par, MemStack::new(buf));
+        // the triangular solves run sequentially: faer's parallel ones sum
+        // in an order that depends on the thread count (the factorisation's
+        // does not), and one right-hand side gains little from threads
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(x, n, 1),
+            Par::Seq,
+            MemStack::new(buf),
+        );
         Ok(())
     }
 
