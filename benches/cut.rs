@@ -5,10 +5,10 @@
 
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
 
+use cleave::mesh::Plane;
 use cleave::meshing::box_tet;
 use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
-use cleave::topology::Plane;
 
 /// A clamped 4 x 1 x 1 m bar of `cells` cubes (six tetrahedra each),
 /// stepped once, solved by CG.

@@ -4,8 +4,8 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 
-use cleave::bench::{element_with_vertices, replicate};
 use cleave::material::Material;
+use cleave::meshing::{element_with_vertices, replicate};
 use cleave::store::{BasisOptions, ElementStore};
 use cleave_kernels::{mean_value, quadrature};
 

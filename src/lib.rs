@@ -27,12 +27,12 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod assembly;
-pub mod bench;
 pub mod io;
 pub mod material;
 pub mod mesh;
 pub mod meshing;
 pub mod output;
+pub mod param;
 pub mod scene;
 pub mod sim;
 pub mod solve;
@@ -50,12 +50,9 @@ pub enum Error {
     /// A file could not be read or written.
     #[error(transparent)]
     Io(#[from] io::IoError),
-    /// A scene file is malformed or holds a value out of range.
-    #[error(transparent)]
-    Scene(#[from] scene::SceneError),
-    /// A material parameter is out of range.
-    #[error(transparent)]
-    Material(#[from] material::MaterialError),
+    /// A parameter is out of its allowed range.
+    #[error("invalid parameter {0}")]
+    Parameter(#[from] param::ParamError),
     /// A basis could not be built on an element.
     #[error(transparent)]
     Basis(#[from] store::BasisError),
@@ -67,8 +64,13 @@ pub enum Error {
     Solve(#[from] solve::SolveError),
     /// A time step failed.
     #[error("step {step}: {source}")]
-    Step { step: usize, source: solve::SolveError },
-    /// A parameter passed through the API is invalid.
-    #[error("invalid parameter: {0}")]
-    Parameter(String),
+    Step {
+        /// The step that failed (0 for the first).
+        step: usize,
+        /// Why its solve failed.
+        source: solve::SolveError,
+    },
+    /// An invariant of cleave itself does not hold: a bug, to be reported.
+    #[error("internal error (please report): {0}")]
+    Internal(String),
 }

@@ -5,9 +5,10 @@
 //! Timoshenko 40.12 m; 39.27 m is the limit the issue tracker gives from an
 //! independent code.)
 
+use cleave::mesh::Plane;
 use cleave::meshing::{box_hex, box_l_prisms};
 use cleave::store::{BasisOptions, Family};
-use cleave::topology::{split_by_plane, Plane, SplitOptions};
+use cleave::topology::{split_by_plane, SplitOptions};
 
 mod common;
 

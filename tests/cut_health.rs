@@ -8,11 +8,12 @@
 //! `-1e-12 λmax`, and `λ7 / λmax` above the store's floor.
 
 use cleave::io::read_mesh;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::random_convex;
 use cleave::sim::{Collider, Simulation, SimulationParams};
 use cleave::store::{BasisOptions, HealthFloors};
-use cleave::topology::{merge_slivers, Plane, SplitOptions};
+use cleave::topology::{merge_slivers, SplitOptions};
 use faer::{Mat, Side};
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;

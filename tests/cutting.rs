@@ -1,10 +1,11 @@
 //! Cutting along planes: invariants after every cut on random cut
 //! sequences, separation of the pieces, and long runs after cuts.
 
+use cleave::mesh::Plane;
 use cleave::mesh::{face_geometry, PolyMesh, ValidationOptions};
 use cleave::meshing::{box_hex, box_tet};
 use cleave::sim::{FixedRegion, Simulation, SimulationParams};
-use cleave::topology::{cut_by_plane, Plane, SplitOptions};
+use cleave::topology::{cut_by_plane, SplitOptions};
 use proptest::prelude::*;
 
 mod common;

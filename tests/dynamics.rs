@@ -3,11 +3,11 @@
 //! CG, and trajectories independent of the thread count.
 
 use cleave::material::Material;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_tet, random_convex};
 use cleave::sim::{Collider, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
-use cleave::topology::Plane;
 
 mod common;
 

@@ -6,11 +6,12 @@
 mod common;
 
 use cleave::material::Material;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_l_prisms;
 use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementKind, ElementStore, Family, HarmonicOptions};
-use cleave::topology::{split_elements_by_plane, Plane, SplitOptions};
+use cleave::topology::{split_elements_by_plane, SplitOptions};
 
 fn harmonic(trilinear_hexahedra: bool) -> BasisOptions {
     BasisOptions {

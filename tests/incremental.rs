@@ -6,11 +6,12 @@
 
 use cleave::assembly::SparsePattern;
 use cleave::material::Material;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_tet;
 use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementStore, HealthFloors};
-use cleave::topology::{cut_by_plane, cut_by_polygon, polygon_plane, CutReport, Plane, Rollback, SplitOptions};
+use cleave::topology::{cut_by_plane, cut_by_polygon, polygon_plane, CutReport, Rollback, SplitOptions};
 use proptest::prelude::*;
 
 mod common;

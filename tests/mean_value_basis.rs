@@ -3,9 +3,10 @@
 //! against finite differences, face continuity, SIMD against scalar, and
 //! the linear tetrahedron as the k = 4 case.
 
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_hex;
-use cleave::topology::{split_by_plane, Plane, SplitOptions};
+use cleave::topology::{split_by_plane, SplitOptions};
 use cleave_kernels::mean_value::{evaluate, evaluate_scalar};
 use cleave_kernels::vec3::{add, dot, norm, scale, sub};
 use proptest::prelude::*;

@@ -5,10 +5,11 @@
 
 use cleave::assembly::SparsePattern;
 use cleave::material::Material;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_tet, random_convex};
 use cleave::store::{BasisOptions, ElementStore, QuadratureRule};
-use cleave::topology::{split_by_plane, Plane, SplitOptions};
+use cleave::topology::{split_by_plane, SplitOptions};
 use cleave_kernels::{elasticity, mean_value, quadrature};
 
 mod common;

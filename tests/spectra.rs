@@ -6,11 +6,11 @@
 //! fails them by orders of magnitude.
 
 use cleave::material::Material;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_hex, box_l_prisms, box_tet, random_convex};
 use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementKind, ElementStore, Family, HarmonicOptions, QuadratureRule};
-use cleave::topology::Plane;
 
 mod common;
 

@@ -2,9 +2,10 @@
 //! volume and boundary area, on random planes through tet, hex and
 //! already-split meshes.
 
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_hex, box_tet, random_convex};
-use cleave::topology::{split_by_plane, split_elements_by_plane, Plane, SplitOptions};
+use cleave::topology::{split_by_plane, split_elements_by_plane, SplitOptions};
 use proptest::prelude::*;
 
 mod common;

@@ -37,18 +37,29 @@ pub fn voigt_matrix(lambda: f64, mu: f64) -> [[f64; 6]; 6] {
     c
 }
 
-/// Adds `w B_a^T C B_b` to the row-major 3x3 block `block` (see module docs).
+/// The isotropic block `w B_aᵀ C B_b` (N/m, row-major; see the module
+/// docs) for gradients `g_a` (rows), `g_b` (columns), weight `w` (m³, a
+/// quadrature weight or a tetrahedron's volume times a scale) and Lamé
+/// parameters (Pa), evaluated as `g_a[i] (wλ g_b)[j] + g_a[j] (wμ g_b)[i]
+/// + δ_ij g_a · (wμ g_b)`. With gradients rotated by `R` it is the warped
+/// block `R K_ab Rᵀ` ([`crate::corotation`]).
 #[inline(always)]
-pub fn add_block(block: &mut [f64; 9], ga: [f64; 3], gb: [f64; 3], w: f64, lambda: f64, mu: f64) {
-    let wl = w * lambda;
-    let wm = w * mu;
-    let d = wm * (ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2]);
-    for i in 0..3 {
-        for j in 0..3 {
-            block[3 * i + j] += wl * ga[i] * gb[j] + wm * ga[j] * gb[i];
-        }
-        block[4 * i] += d;
-    }
+pub fn block(ga: [f64; 3], gb: [f64; 3], w: f64, lambda: f64, mu: f64) -> [f64; 9] {
+    let (l, m) = (w * lambda, w * mu);
+    let lgb = [l * gb[0], l * gb[1], l * gb[2]];
+    let mgb = [m * gb[0], m * gb[1], m * gb[2]];
+    let d = ga[0] * mgb[0] + ga[1] * mgb[1] + ga[2] * mgb[2];
+    [
+        ga[0] * lgb[0] + ga[0] * mgb[0] + d,
+        ga[0] * lgb[1] + ga[1] * mgb[0],
+        ga[0] * lgb[2] + ga[2] * mgb[0],
+        ga[1] * lgb[0] + ga[0] * mgb[1],
+        ga[1] * lgb[1] + ga[1] * mgb[1] + d,
+        ga[1] * lgb[2] + ga[2] * mgb[1],
+        ga[2] * lgb[0] + ga[0] * mgb[2],
+        ga[2] * lgb[1] + ga[1] * mgb[2],
+        ga[2] * lgb[2] + ga[2] * mgb[2] + d,
+    ]
 }
 
 /// Scratch values [`element_stiffness`] and its scalar reference need for
@@ -226,8 +237,7 @@ mod tests {
         let c = voigt_matrix(l, m);
         let ga = [0.3, -1.2, 0.7];
         let gb = [-0.4, 0.9, 2.1];
-        let mut block = [0.0; 9];
-        add_block(&mut block, ga, gb, 0.37, l, m);
+        let block = block(ga, gb, 0.37, l, m);
         let (ba, bb) = (b_matrix(ga), b_matrix(gb));
         for i in 0..3 {
             for j in 0..3 {
@@ -274,14 +284,15 @@ mod tests {
         let n = 3 * k;
         for aa in 0..k {
             for bb in 0..k {
-                let mut block = [0.0; 9];
+                let mut sum = [0.0; 9];
                 for q in 0..nq {
                     let g = |v: usize| [0, 1, 2].map(|i| grad[(3 * v + i) * nq + q]);
-                    add_block(&mut block, g(aa), g(bb), weights[q], l, m);
+                    let add = block(g(aa), g(bb), weights[q], l, m);
+                    (0..9).for_each(|i| sum[i] += add[i]);
                 }
                 for i in 0..3 {
                     for j in 0..3 {
-                        let want = block[3 * i + j];
+                        let want = sum[3 * i + j];
                         assert!((a[(3 * aa + i) * n + 3 * bb + j] - want).abs() <= 1e-12 * want.abs().max(1.0));
                     }
                 }

@@ -16,6 +16,8 @@
 // kernels; iterator chains would hide them.
 #![allow(clippy::needless_range_loop)]
 
+pub mod corotation;
+pub mod dual;
 pub mod elasticity;
 pub mod harmonic;
 pub mod lanes;

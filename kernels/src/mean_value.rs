@@ -30,7 +30,8 @@
 
 use pulp::Simd;
 
-use crate::lanes::{Dual, Lanes, Real};
+use crate::dual::Dual;
+use crate::lanes::{Lanes, Real};
 
 #[inline(always)]
 fn cross<R: Real>(a: [R; 3], b: [R; 3]) -> [R; 3] {

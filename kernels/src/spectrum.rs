@@ -430,8 +430,7 @@ mod tests {
         let mut ke = vec![0.0; 144];
         for a in 0..4 {
             for b in 0..4 {
-                let mut block = [0.0; 9];
-                crate::elasticity::add_block(&mut block, g[a], g[b], volume, lambda, mu);
+                let block = crate::elasticity::block(g[a], g[b], volume, lambda, mu);
                 for r in 0..3 {
                     for c in 0..3 {
                         ke[(3 * a + r) * 12 + 3 * b + c] = block[3 * r + c];

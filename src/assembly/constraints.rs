@@ -17,6 +17,15 @@ impl Constraints {
         Constraints { fixed: vec![false; n], value: vec![0.0; n] }
     }
 
+    /// No unknown fixed, for `n` scalar unknowns, in the memory this
+    /// already holds.
+    pub fn reset(&mut self, n: usize) {
+        self.fixed.clear();
+        self.fixed.resize(n, false);
+        self.value.clear();
+        self.value.resize(n, 0.0);
+    }
+
     /// Fixes scalar unknown `d` to `v`.
     pub fn fix(&mut self, d: usize, v: f64) {
         self.fixed[d] = true;

@@ -8,13 +8,19 @@
 //! matrix stores both triangles (it is symmetric): the Cholesky solver reads
 //! the lower one, matrix-vector products read it as compressed rows.
 //!
+//! The pattern knows unknowns and their couplings only ([`Couplings`]): an
+//! element store of a nodal family is one such description, whose blocks
+//! are nodes and whose entries are elements.
+//!
 //! Assembly is parallel and deterministic: each node gathers, in a fixed
 //! order, the blocks of the elements around it into its own columns (see
 //! [`SparsePattern`]), so every matrix entry receives its contributions in
 //! the same order whatever the thread count, without locks or atomics.
 
 mod constraints;
+mod couplings;
 mod pattern;
 
 pub use constraints::Constraints;
+pub use couplings::{Couplings, MAX_ENTRY_BLOCKS};
 pub use pattern::SparsePattern;

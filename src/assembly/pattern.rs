@@ -4,7 +4,7 @@
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use rayon::prelude::*;
 
-use crate::store::ElementStore;
+use super::{Couplings, MAX_ENTRY_BLOCKS};
 
 /// One element touching a node: where the node sits in it, and where the
 /// element's blocks land in the node's column.
@@ -108,18 +108,19 @@ enum Column<'a> {
 }
 
 impl SparsePattern {
-    /// Builds the pattern of `store` over `num_blocks` blocks (nodes).
-    pub fn build(num_blocks: usize, store: &ElementStore) -> Self {
+    /// Builds the pattern of `store`'s couplings over `num_blocks` blocks.
+    pub fn build(num_blocks: usize, store: &impl Couplings) -> Self {
         let mut columns: Vec<Vec<Incidence>> = vec![Vec::new(); num_blocks];
-        for (bi, b) in store.batches.iter().enumerate() {
-            for e in 0..b.len() {
-                for (a, &v) in b.element_nodes(e).iter().enumerate() {
+        for bi in 0..store.groups() {
+            for e in 0..store.entries(bi) {
+                let blocks = store.blocks(bi, e);
+                for (a, &v) in blocks.iter().enumerate() {
                     columns[v as usize].push(Incidence {
                         batch: bi as u32,
                         element: e as u32,
-                        id: b.elements[e],
+                        id: store.id(bi, e),
                         local: a as u32,
-                        size: b.k as u32,
+                        size: blocks.len() as u32,
                         slots: 0,
                     });
                 }
@@ -131,21 +132,23 @@ impl SparsePattern {
         Self::lay_out(store, columns.into_iter().map(Column::New).collect(), buffers)
     }
 
-    /// Updates the pattern after the elements `changed` (mesh ids, sorted)
-    /// were rebuilt in `store` (see [`ElementStore::update`]); `old_nodes`
-    /// are the nodes those elements had before. Only the columns of their
-    /// nodes, old and new, are recomputed; the others are copied.
-    pub fn update(&mut self, num_blocks: usize, store: &ElementStore, changed: &[u32], old_nodes: &[u32]) {
+    /// Updates the pattern after the entries `changed` (stable ids, sorted)
+    /// were rebuilt in `store` (for an element store, see
+    /// [`crate::store::ElementStore::update`]); `old_nodes` are the blocks
+    /// those entries coupled before. Only the columns of their blocks, old
+    /// and new, are recomputed; the others are copied.
+    pub fn update(&mut self, num_blocks: usize, store: &impl Couplings, changed: &[u32], old_nodes: &[u32]) {
         let spare = std::mem::take(&mut self.spare);
         let mut dirty = vec![false; num_blocks];
         old_nodes.iter().for_each(|&v| dirty[v as usize] = true);
         let mut added: Vec<(u32, Incidence)> = Vec::new();
         for &e in changed {
-            let (bi, i) = store.locate[e as usize];
-            let b = &store.batches[bi as usize];
-            for (a, &v) in b.element_nodes(i as usize).iter().enumerate() {
+            let (bi, i) = store.locate(e);
+            let blocks = store.blocks(bi as usize, i as usize);
+            for (a, &v) in blocks.iter().enumerate() {
                 dirty[v as usize] = true;
-                let inc = Incidence { batch: bi, element: i, id: e, local: a as u32, size: b.k as u32, slots: 0 };
+                let size = blocks.len() as u32;
+                let inc = Incidence { batch: bi, element: i, id: e, local: a as u32, size, slots: 0 };
                 added.push((v, inc));
             }
         }
@@ -165,7 +168,7 @@ impl SparsePattern {
             }
             // entries of other elements may have moved in their batch
             for inc in &mut incidences {
-                (inc.batch, inc.element) = store.locate[inc.id as usize];
+                (inc.batch, inc.element) = store.locate(inc.id);
             }
             columns.push(Column::New(incidences));
         }
@@ -188,7 +191,7 @@ impl SparsePattern {
 
     /// Lays out the compressed columns of `columns` into `buffers`, copying
     /// the rows and slots of kept columns.
-    fn lay_out(store: &ElementStore, columns: Vec<Column>, buffers: Buffers) -> Self {
+    fn lay_out(store: &impl Couplings, columns: Vec<Column>, buffers: Buffers) -> Self {
         let num_blocks = columns.len();
         // block rows of every recomputed column: union of its elements' nodes
         let rows: Vec<Vec<u32>> = columns
@@ -200,9 +203,7 @@ impl SparsePattern {
                 };
                 let mut r: Vec<u32> = incidences
                     .iter()
-                    .flat_map(|inc| {
-                        store.batches[inc.batch as usize].element_nodes(inc.element as usize).iter().copied()
-                    })
+                    .flat_map(|inc| store.blocks(inc.batch as usize, inc.element as usize).iter().copied())
                     .collect();
                 r.push(j as u32); // lone nodes keep their diagonal
                 r.sort_unstable();
@@ -231,7 +232,7 @@ impl SparsePattern {
                     diagonal.push(old.diagonal[j]);
                     for inc in old.column_incidences(j) {
                         let from = inc.slots as usize;
-                        let (batch, element) = store.locate[inc.id as usize];
+                        let (batch, element) = store.locate(inc.id);
                         incidences.push(Incidence { batch, element, slots: slots.len() as u32, ..*inc });
                         slots.extend_from_slice(&old.slots[from..from + inc.size as usize]);
                     }
@@ -250,7 +251,7 @@ impl SparsePattern {
                     diagonal.push(position(j as u32));
                     for inc in &new_incidences {
                         incidences.push(Incidence { slots: slots.len() as u32, ..*inc });
-                        let nodes = store.batches[inc.batch as usize].element_nodes(inc.element as usize);
+                        let nodes = store.blocks(inc.batch as usize, inc.element as usize);
                         slots.extend(nodes.iter().map(|&a| position(a)));
                     }
                 }
@@ -305,7 +306,9 @@ impl SparsePattern {
         assert_eq!(values.len(), self.nnz());
         let shared = SharedValues(values.as_mut_ptr());
         let col_ptr = self.symbolic.col_ptr();
-        (0..self.num_blocks).into_par_iter().with_min_len(64).for_each_init(Vec::new, |scratch, j| {
+        // one column of blocks per task, on the stack (no allocation)
+        let column = || [[0.0f64; 9]; MAX_ENTRY_BLOCKS];
+        (0..self.num_blocks).into_par_iter().with_min_len(64).for_each_init(column, |scratch, j| {
             let (stride, base) = (self.col_stride[j], col_ptr[3 * j]);
             for p in col_ptr[3 * j]..col_ptr[3 * j + 3] {
                 // SAFETY: entries of columns 3j..3j+3 belong to this node task only.
@@ -313,7 +316,7 @@ impl SparsePattern {
             }
             for inc in &self.incidences[self.offsets[j] as usize..self.offsets[j + 1] as usize] {
                 let slots = &self.slots[inc.slots as usize..(inc.slots + inc.size) as usize];
-                scratch.resize(slots.len(), [0.0; 9]);
+                let scratch = &mut scratch[..slots.len()];
                 blocks(inc.batch as usize, inc.element as usize, inc.local as usize, scratch);
                 for (kab, &slot) in scratch.iter().zip(slots) {
                     for c in 0..3 {

@@ -1,6 +1,40 @@
-//! Geometry of face loops: normal, area, centroid and planarity.
+//! Geometry: oriented planes, and face loops (normal, area, centroid,
+//! planarity, folds).
 
 use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
+
+/// An oriented plane through `point` with normal `normal` (need not be unit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    /// A point on the plane (m).
+    pub point: [f64; 3],
+    /// The normal; the positive side is where it points.
+    pub normal: [f64; 3],
+}
+
+impl Plane {
+    /// Checks that the point is finite and the normal finite and non-zero.
+    pub fn check(&self) -> Result<(), crate::param::ParamError> {
+        crate::param::finite("point", self.point, "must be finite (m)")?;
+        let n = norm(self.normal);
+        if !(n > 0.0 && n.is_finite()) {
+            return Err(crate::param::ParamError::new("normal", self.normal, "must be finite and non-zero"));
+        }
+        Ok(())
+    }
+
+    /// Signed distance of `x` from the plane (m), positive on the normal's
+    /// side.
+    pub fn distance(&self, x: [f64; 3]) -> f64 {
+        dot(sub(x, self.point), self.normal) / norm(self.normal)
+    }
+
+    /// [`Plane::distance`] of every point.
+    pub fn distances(&self, points: &[[f64; 3]]) -> Vec<f64> {
+        let n = scale(self.normal, 1.0 / norm(self.normal));
+        points.iter().map(|&x| dot(sub(x, self.point), n)).collect()
+    }
+}
 
 /// Geometric summary of a planar (or almost planar) face loop.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -12,11 +12,12 @@
 
 mod adjacency;
 mod geometry;
+mod repair;
 mod triangulate;
 mod validate;
 
 pub use adjacency::Adjacency;
-pub use geometry::{face_geometry, fold_depth, FaceGeometry};
+pub use geometry::{face_geometry, fold_depth, FaceGeometry, Plane};
 pub use triangulate::triangulate_loop;
 pub use validate::{MeshError, ValidationOptions};
 

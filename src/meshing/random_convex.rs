@@ -6,8 +6,9 @@ use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::box_hex;
+use crate::mesh::Plane;
 use crate::mesh::PolyMesh;
-use crate::topology::{classify_split, split_by_plane, Plane, SplitOptions};
+use crate::topology::{classify_split, split_by_plane, SplitOptions};
 
 /// Uniform number in `[0, 1)` from 53 random bits.
 fn uniform(rng: &mut ChaCha8Rng) -> f64 {

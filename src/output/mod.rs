@@ -6,8 +6,17 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::io::{write_boundary_obj, write_vtu, IoError, VtuFields};
-use crate::scene::Format;
 use crate::sim::{Located, PhaseTimings, Simulation};
+
+/// Frame formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// VTK unstructured grid with polyhedron cells, the deformed positions
+    /// and per-node and per-cell fields.
+    Vtu,
+    /// The boundary surface as OBJ.
+    Obj,
+}
 
 /// Writes frame `index` of `sim` in `formats` into `dir`
 /// (`frame_NNNN.vtu`, `frame_NNNN.obj`). Points are the deformed positions;
@@ -29,12 +38,6 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                 write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, positions, &fields)?;
             }
             Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), positions)?,
-            Format::Png => {
-                return Err(IoError::Unsupported {
-                    path: dir.to_path_buf(),
-                    message: "png output is not implemented".into(),
-                })
-            }
         }
     }
     Ok(())

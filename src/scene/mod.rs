@@ -14,6 +14,8 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
+use crate::param::ParamError;
+
 /// A scene that cannot be read or run.
 #[derive(Debug, Error)]
 pub enum SceneError {
@@ -29,6 +31,9 @@ pub enum SceneError {
     /// A valid key asks for something this build does not do yet.
     #[error("{}:{line}: {key}: {message}", .path.display())]
     Unsupported { path: PathBuf, line: usize, key: String, message: String },
+    /// The engine failed while building or running the scene.
+    #[error("{}: {source}", .path.display())]
+    Engine { path: PathBuf, source: Box<crate::Error> },
 }
 
 /// A parsed scene with the file it came from.
@@ -87,6 +92,11 @@ impl LoadedScene {
             value: value.to_string(),
             allowed: allowed.to_string(),
         }
+    }
+
+    /// The engine's [`ParamError`] as an error at scene key `key`.
+    pub(crate) fn param(&self, key: &str, e: ParamError) -> SceneError {
+        self.invalid(key, e.value, &e.allowed)
     }
 
     pub(crate) fn unsupported(&self, key: &str, message: &str) -> SceneError {

@@ -4,15 +4,13 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use super::{BoxElement, Family, Generator, LoadedScene, Mode, Quadrature};
+use super::{BoxElement, Generator, LoadedScene, Mode, SceneError};
 use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_convex};
 use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
-use crate::sim::{Collider, FixedRegion, Located, Simulation, SimulationParams};
-use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
+use crate::sim::{Located, Simulation};
 use crate::topology::merge_slivers;
-use crate::topology::Plane;
 use crate::Error;
 
 /// Command-line overrides of a scene.
@@ -28,28 +26,37 @@ pub struct RunOptions {
 impl LoadedScene {
     /// Builds the scene's mesh (read or generated), with its slivers merged
     /// away when `mesh.merge_slivers` asks for it.
-    pub fn build_mesh(&self) -> Result<PolyMesh, Error> {
+    pub fn build_mesh(&self) -> Result<PolyMesh, SceneError> {
         let mut mesh = self.read_or_generate_mesh()?;
         if let Some(q) = self.scene.mesh.merge_slivers {
-            merge_slivers(&mut mesh, q)?;
+            merge_slivers(&mut mesh, q).map_err(|e| self.engine(e))?;
         }
         Ok(mesh)
     }
 
-    fn read_or_generate_mesh(&self) -> Result<PolyMesh, Error> {
+    /// The engine's error `e`, met while building or running this scene.
+    pub fn engine(&self, e: impl Into<Error>) -> SceneError {
+        SceneError::Engine { path: self.path.clone(), source: Box::new(e.into()) }
+    }
+
+    fn read_or_generate_mesh(&self) -> Result<PolyMesh, SceneError> {
         let m = &self.scene.mesh;
         if let Some(file) = &m.file {
-            return Ok(read_mesh(&self.resolve(file))?);
+            return read_mesh(&self.resolve(file)).map_err(|e| self.engine(e));
         }
         let (min, max) = (m.min.unwrap_or([0.0; 3]), m.max.unwrap_or([1.0; 3]));
-        match (m.generator, m.element) {
-            (Some(Generator::Box), Some(BoxElement::Hex)) => Ok(box_hex(min, max, m.cells.unwrap_or([1; 3]))?),
-            (Some(Generator::Box), Some(BoxElement::Tet)) => Ok(box_tet(min, max, m.cells.unwrap_or([1; 3]))?),
+        let generated: Result<PolyMesh, Error> = match (m.generator, m.element) {
+            (Some(Generator::Box), Some(BoxElement::Hex)) => {
+                box_hex(min, max, m.cells.unwrap_or([1; 3])).map_err(Error::from)
+            }
+            (Some(Generator::Box), Some(BoxElement::Tet)) => {
+                box_tet(min, max, m.cells.unwrap_or([1; 3])).map_err(Error::from)
+            }
             (Some(Generator::Box), Some(BoxElement::LPrism)) => {
-                Ok(box_l_prisms(min, max, m.cells.unwrap_or([2, 2, 1]))?)
+                box_l_prisms(min, max, m.cells.unwrap_or([2, 2, 1])).map_err(Error::from)
             }
             (Some(Generator::Prism), _) => {
-                Ok(prism(m.outline.as_deref().unwrap_or_default(), m.height.unwrap_or(1.0))?)
+                prism(m.outline.as_deref().unwrap_or_default(), m.height.unwrap_or(1.0)).map_err(Error::from)
             }
             (Some(Generator::Box), Some(BoxElement::RandomConvex)) => {
                 random_convex(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(1))
@@ -57,8 +64,9 @@ impl LoadedScene {
             (Some(Generator::Box), Some(BoxElement::Clipped)) => {
                 clipped_box(min, max, m.planes.unwrap_or(8), m.seed.unwrap_or(0))
             }
-            _ => Err(self.invalid("mesh", "…", "needs mesh.file or a generator with an element kind").into()),
-        }
+            _ => return Err(self.invalid("mesh", "…", "needs mesh.file or a generator with an element kind")),
+        };
+        generated.map_err(|e| self.engine(e))
     }
 
     /// The output folder: `--out`, else `output.dir` (relative to the scene),
@@ -75,58 +83,20 @@ impl LoadedScene {
 
     /// Builds the simulation: mesh, material, solver, fixed regions,
     /// colliders and initial velocity.
-    pub fn build_simulation(&self) -> Result<Simulation, Error> {
+    pub fn build_simulation(&self) -> Result<Simulation, SceneError> {
         let mesh = self.build_mesh()?;
         let s = &self.scene;
-        let quadrature = match s.basis.quadrature {
-            Quadrature::Consistent => QuadratureRule::Consistent,
-            Quadrature::Paper => QuadratureRule::Paper,
-        };
-        let sim_spec = &s.simulation;
-        let params = SimulationParams {
-            material: s.material(),
-            gravity: sim_spec.gravity,
-            basis: BasisOptions {
-                family: match s.basis.family {
-                    Family::Harmonic => store::Family::Harmonic,
-                    Family::MeanValue | Family::Dg => store::Family::MeanValue,
-                },
-                quadrature,
-                harmonic: {
-                    let d = HarmonicOptions::default();
-                    HarmonicOptions {
-                        offset: s.basis.offset.unwrap_or(d.offset),
-                        edge_samples: s.basis.edge_samples.unwrap_or(d.edge_samples),
-                        quadrature_order: s.basis.quadrature_order.unwrap_or(d.quadrature_order),
-                        ..d
-                    }
-                },
-                ..Default::default()
-            },
-            dt: sim_spec.dt,
-            mass_damping: sim_spec.damping.mass,
-            stiffness_damping: sim_spec.damping.stiffness,
-            corotated: sim_spec.corotated,
-            solver: s.solver.kind,
-            tolerance: s.solver.tolerance,
-            max_iterations: s.solver.max_iterations,
-            ..Default::default()
-        };
-        let mut sim = Simulation::new(mesh, params)?;
+        let engine = |e: Error| self.engine(e);
+        let mut sim = Simulation::new(mesh, s.params(self)?).map_err(engine)?;
         for f in &s.fixed {
-            sim.fix(FixedRegion {
-                min: f.region.min,
-                max: f.region.max,
-                displacement: f.displacement,
-                gradient: f.gradient,
-            })?;
+            sim.fix(f.region()).map_err(engine)?;
         }
         for c in &s.collider {
-            sim.add_collider(Collider::new(c.plane.point, c.plane.normal, c.stiffness)?);
+            sim.add_collider(c.collider().map_err(|e| self.engine(e))?);
         }
-        if sim_spec.velocity != [0.0; 3] {
-            let v = vec![sim_spec.velocity; sim.mesh().nodes.len()];
-            sim.set_velocities(&v)?;
+        let v0 = s.simulation.velocity;
+        if v0 != [0.0; 3] {
+            sim.set_velocities(&vec![v0; sim.mesh().nodes.len()]).map_err(engine)?;
         }
         Ok(sim)
     }
@@ -146,7 +116,32 @@ fn progress(steps: usize) -> indicatif::ProgressBar {
 
 /// Runs a scene: builds it, solves or steps it, writes frames and
 /// `summary.json` into the output folder, and returns the summary.
-pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Error> {
+pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, SceneError> {
+    run(scene, opts).map_err(|e| match e {
+        Failure::Scene(e) => e,
+        Failure::Engine(e) => scene.engine(e),
+    })
+}
+
+/// What stops a run: the scene, or the engine running it.
+enum Failure {
+    Scene(SceneError),
+    Engine(Error),
+}
+
+impl From<SceneError> for Failure {
+    fn from(e: SceneError) -> Self {
+        Failure::Scene(e)
+    }
+}
+
+impl<E: Into<Error>> From<E> for Failure {
+    fn from(e: E) -> Self {
+        Failure::Engine(e.into())
+    }
+}
+
+fn run(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Failure> {
     let started = Instant::now();
     let dir = scene.output_dir(opts);
     let mut sim = scene.build_simulation()?;
@@ -156,9 +151,10 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
     let mut frames = 0;
     let (mut worst_stretch, mut max_node_speed) = (Located { value: 1.0, at: 0 }, Located::default());
     let mut min_mass_ratio = sim.min_mass_ratio();
+    let formats = s.formats();
     let mut write = |sim: &mut Simulation, index: usize| -> Result<(), Error> {
         let t = Instant::now();
-        write_frame(&dir, index, sim, &s.output.formats)?;
+        write_frame(&dir, index, sim, &formats)?;
         let (stretch, speed) = (sim.worst_stretch(), sim.max_node_speed());
         if stretch.value > worst_stretch.value {
             worst_stretch = stretch;
@@ -184,7 +180,7 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
                 for cut in s.cut.iter().filter(|c| c.step == step) {
                     match (&cut.plane, &cut.polygon) {
                         (Some(p), _) => {
-                            sim.cut_plane(&Plane { point: p.point, normal: p.normal })?;
+                            sim.cut_plane(&p.plane())?;
                         }
                         (None, Some(polygon)) => {
                             sim.cut_polygon(polygon)?;
@@ -222,12 +218,12 @@ pub fn run_scene(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Erro
         steps,
         wall_time: wall,
         wall_time_total: total,
-        ms_per_step: 1e3 * (wall.rotation + wall.assembly + wall.solve) / steps.max(1) as f64,
+        ms_per_step: 1e3 * wall.steps() / steps.max(1) as f64,
         max_displacement: sim.max_displacement(),
         elastic_energy: sim.elastic_energy(),
         kinetic_energy: sim.kinetic_energy(),
         solver: SolverSummary {
-            kind: format!("{:?}", s.solver.kind).to_lowercase(),
+            kind: format!("{:?}", s.solver.kind.kind()).to_lowercase(),
             iterations: MeanMax::of(stats.iter().map(|s| s.iterations as f64)),
             residual: MeanMax::of(stats.iter().map(|s| s.residual)),
         },

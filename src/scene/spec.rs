@@ -4,7 +4,13 @@ use serde::Deserialize;
 
 use super::{LoadedScene, SceneError};
 use crate::material::Material;
-pub use crate::solve::SolverKind;
+use crate::mesh::Plane;
+use crate::output::Format;
+use crate::param::ParamError;
+use crate::sim::{Collider, FixedRegion, SimulationParams};
+use crate::solve::SolverKind;
+use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
+use crate::topology::polygon_plane;
 
 /// A whole scene.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -275,7 +281,7 @@ pub struct DampingSpec {
 pub struct SolverSpec {
     /// Direct or iterative.
     #[serde(default)]
-    pub kind: SolverKind,
+    pub kind: SolverName,
     /// Relative residual tolerance of iterative solvers.
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
@@ -294,7 +300,34 @@ fn default_tolerance() -> f64 {
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        SolverSpec { kind: SolverKind::Auto, tolerance: default_tolerance(), max_iterations: default_max_iterations() }
+        SolverSpec { kind: SolverName::Auto, tolerance: default_tolerance(), max_iterations: default_max_iterations() }
+    }
+}
+
+/// Solvers as a scene names them (see [`SolverKind`]).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverName {
+    /// `"auto"`: Cholesky for small systems, CG for large ones.
+    #[default]
+    Auto,
+    /// `"cholesky"`.
+    Cholesky,
+    /// `"cg"`: block-Jacobi preconditioned conjugate gradients.
+    Cg,
+    /// `"cg-rest"`: CG preconditioned by the rotated rest-state factor.
+    CgRest,
+}
+
+impl SolverName {
+    /// The engine's solver kind.
+    pub fn kind(self) -> SolverKind {
+        match self {
+            SolverName::Auto => SolverKind::Auto,
+            SolverName::Cholesky => SolverKind::Cholesky,
+            SolverName::Cg => SolverKind::Cg,
+            SolverName::CgRest => SolverKind::CgRest,
+        }
     }
 }
 
@@ -378,14 +411,14 @@ pub struct OutputSpec {
     pub every: usize,
     /// Frame formats.
     #[serde(default = "default_formats")]
-    pub formats: Vec<Format>,
+    pub formats: Vec<FormatName>,
 }
 
 fn default_every() -> usize {
     1
 }
-fn default_formats() -> Vec<Format> {
-    vec![Format::Vtu]
+fn default_formats() -> Vec<FormatName> {
+    vec![FormatName::Vtu]
 }
 
 impl Default for OutputSpec {
@@ -394,16 +427,39 @@ impl Default for OutputSpec {
     }
 }
 
-/// Frame formats.
+/// Frame formats as a scene names them.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
-pub enum Format {
-    /// VTK unstructured grid with polyhedron cells.
+pub enum FormatName {
+    /// `"vtu"`: VTK unstructured grid with polyhedron cells.
     Vtu,
-    /// Boundary surface as OBJ.
+    /// `"obj"`: boundary surface as OBJ.
     Obj,
-    /// Rendered snapshot.
+    /// `"png"`: rendered snapshot (not implemented yet).
     Png,
+}
+
+impl FormatName {
+    /// The output format, or `None` for one not implemented.
+    pub fn format(self) -> Option<Format> {
+        match self {
+            FormatName::Vtu => Some(Format::Vtu),
+            FormatName::Obj => Some(Format::Obj),
+            FormatName::Png => None,
+        }
+    }
+}
+
+/// The scene key of an engine parameter of [`SimulationParams`].
+fn key_of(name: &str) -> String {
+    match name {
+        "young" | "poisson" | "density" => format!("material.{name}"),
+        "gravity" | "dt" => format!("simulation.{name}"),
+        "mass_damping" | "stiffness_damping" => "simulation.damping".into(),
+        "tolerance" | "max_iterations" => format!("solver.{name}"),
+        "offset" | "edge_samples" | "quadrature_order" => format!("basis.{name}"),
+        _ => "simulation".into(),
+    }
 }
 
 fn finite3(v: &[f64; 3]) -> bool {
@@ -480,132 +536,51 @@ impl Scene {
         if self.meshing.is_some() {
             return Err(s.unsupported("meshing", "meshing surfaces into elements is not implemented yet"));
         }
-        let mat = &self.material;
-        Material::new(mat.young, mat.poisson, mat.density)
-            .map_err(|e| s.invalid(&format!("material.{}", e.name), e.value, e.allowed))?;
         let b = &self.basis;
-        match b.family {
-            Family::MeanValue => {
-                if b.offset.is_some() || b.edge_samples.is_some() || b.quadrature_order.is_some() {
-                    return Err(s.invalid(
-                        "basis.offset",
-                        "…",
-                        "offset, edge_samples and quadrature_order apply to family = \"harmonic\" only",
-                    ));
-                }
-            }
-            Family::Harmonic => {
-                if let Some(o) = b.offset {
-                    if !(o > 0.0 && o <= 1.0) {
-                        return Err(s.invalid("basis.offset", o, "must be in (0, 1] (fraction of the element size)"));
-                    }
-                }
-                if let Some(n) = b.edge_samples {
-                    if !(1..=10).contains(&n) {
-                        return Err(s.invalid("basis.edge_samples", n, "must be in 1..=10"));
-                    }
-                }
-                if let Some(n) = b.quadrature_order {
-                    if !(1..=6).contains(&n) {
-                        return Err(s.invalid("basis.quadrature_order", n, "must be in 1..=6"));
-                    }
-                }
-            }
-            Family::Dg => {
-                return Err(s.unsupported("basis.family", "only \"mean-value\" and \"harmonic\" are implemented yet"))
-            }
+        if b.family == Family::MeanValue
+            && (b.offset.is_some() || b.edge_samples.is_some() || b.quadrature_order.is_some())
+        {
+            return Err(s.invalid(
+                "basis.offset",
+                "…",
+                "offset, edge_samples and quadrature_order apply to family = \"harmonic\" only",
+            ));
         }
+        let params = self.params(s)?;
         if self.basis.degree.is_some() || self.basis.flux.is_some() {
             return Err(s.invalid("basis.degree", "…", "degree and flux apply to family = \"dg\" only"));
         }
+        params.check().map_err(|e| s.param(&key_of(e.name), e))?;
         let sim = &self.simulation;
-        if !(sim.dt > 0.0 && sim.dt.is_finite()) {
-            return Err(s.invalid("simulation.dt", sim.dt, "must be a finite number > 0 (s)"));
-        }
-        if !finite3(&sim.gravity) {
-            return Err(s.invalid("simulation.gravity", format!("{:?}", sim.gravity), "must be finite (m/s^2)"));
-        }
-        for (name, v) in [("mass", sim.damping.mass), ("stiffness", sim.damping.stiffness)] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(s.invalid(
-                    "simulation.damping",
-                    v,
-                    &format!("damping.{name} must be a finite number >= 0"),
-                ));
-            }
-        }
-        if !finite3(&sim.velocity) {
-            return Err(s.invalid("simulation.velocity", format!("{:?}", sim.velocity), "must be finite (m/s)"));
-        }
+        crate::param::finite("velocity", sim.velocity, "must be finite (m/s)")
+            .map_err(|e| s.param("simulation.velocity", e))?;
         if sim.steps > 10_000_000 {
             return Err(s.invalid("simulation.steps", sim.steps, "must be at most 1e7"));
         }
-        if !(self.solver.tolerance > 0.0 && self.solver.tolerance < 1.0) {
-            return Err(s.invalid("solver.tolerance", self.solver.tolerance, "must lie in (0, 1)"));
-        }
-        if self.solver.max_iterations == 0 {
-            return Err(s.invalid("solver.max_iterations", 0, "must be at least 1"));
-        }
         for (i, f) in self.fixed.iter().enumerate() {
-            let b = &f.region;
-            if !finite3(&b.min) || !finite3(&b.max) || (0..3).any(|k| b.min[k] > b.max[k]) {
-                return Err(s.invalid(
-                    &format!("fixed.{i}.box"),
-                    format!("{b:?}"),
-                    "min and max must be finite with min <= max (m)",
-                ));
-            }
-            if !finite3(&f.displacement) {
-                return Err(s.invalid(
-                    &format!("fixed.{i}.displacement"),
-                    format!("{:?}", f.displacement),
-                    "must be finite (m)",
-                ));
-            }
-            if !f.gradient.iter().all(finite3) {
-                return Err(s.invalid(&format!("fixed.{i}.gradient"), format!("{:?}", f.gradient), "must be finite"));
-            }
+            f.region().check().map_err(|e| {
+                let key = match e.name {
+                    "min" | "max" => format!("fixed.{i}.box"),
+                    name => format!("fixed.{i}.{name}"),
+                };
+                s.param(&key, e)
+            })?;
         }
         for (i, c) in self.collider.iter().enumerate() {
-            let n = c.plane.normal;
-            if !finite3(&c.plane.point) || !finite3(&n) || n.iter().all(|&x| x == 0.0) {
-                let plane = format!("{:?}", c.plane);
-                return Err(s.invalid(
-                    &format!("collider.{i}.plane"),
-                    plane,
-                    "needs a finite point and a non-zero normal",
-                ));
-            }
-            if !(c.stiffness >= 0.0 && c.stiffness.is_finite()) {
-                return Err(s.invalid(
-                    &format!("collider.{i}.stiffness"),
-                    c.stiffness,
-                    "must be a finite number >= 0 (N/m)",
-                ));
-            }
+            c.collider().map_err(|e| {
+                let key = if e.name == "stiffness" {
+                    format!("collider.{i}.stiffness")
+                } else {
+                    format!("collider.{i}.plane")
+                };
+                s.param(&key, e)
+            })?;
         }
         for (i, c) in self.cut.iter().enumerate() {
             match (&c.plane, &c.polygon) {
-                (Some(p), None) => {
-                    let n = p.normal;
-                    if !finite3(&p.point) || !finite3(&n) || n.iter().all(|&x| x == 0.0) {
-                        let plane = format!("{p:?}");
-                        return Err(s.invalid(
-                            &format!("cut.{i}.plane"),
-                            plane,
-                            "needs a finite point and a non-zero normal",
-                        ));
-                    }
-                }
+                (Some(p), None) => p.plane().check().map_err(|e| s.param(&format!("cut.{i}.plane"), e))?,
                 (None, Some(poly)) => {
-                    if poly.len() < 3 || !poly.iter().all(finite3) {
-                        let value = format!("{poly:?}");
-                        return Err(s.invalid(
-                            &format!("cut.{i}.polygon"),
-                            value,
-                            "needs at least 3 finite points (m)",
-                        ));
-                    }
+                    polygon_plane(poly).map_err(|e| s.invalid(&format!("cut.{i}.polygon"), "…", &e.to_string()))?;
                 }
                 _ => return Err(s.invalid(&format!("cut.{i}"), "…", "give exactly one of plane or polygon")),
             }
@@ -619,7 +594,7 @@ impl Scene {
         if self.output.every == 0 {
             return Err(s.invalid("output.every", 0, "must be at least 1"));
         }
-        if self.output.formats.contains(&Format::Png) {
+        if self.output.formats.iter().any(|f| f.format().is_none()) {
             return Err(
                 s.unsupported("output.formats", "png snapshots are not implemented yet; use \"vtu\" and \"obj\"")
             );
@@ -630,5 +605,79 @@ impl Scene {
     /// The material of the scene (range-checked at load).
     pub fn material(&self) -> Material {
         Material { young: self.material.young, poisson: self.material.poisson, density: self.material.density }
+    }
+
+    /// The engine's options for the scene's basis; `family = "dg"` is not
+    /// implemented yet.
+    pub fn basis_options(&self, s: &LoadedScene) -> Result<BasisOptions, SceneError> {
+        let b = &self.basis;
+        let family = match b.family {
+            Family::MeanValue => store::Family::MeanValue,
+            Family::Harmonic => store::Family::Harmonic,
+            Family::Dg => {
+                return Err(s.unsupported("basis.family", "only \"mean-value\" and \"harmonic\" are implemented yet"))
+            }
+        };
+        let quadrature = match b.quadrature {
+            Quadrature::Consistent => QuadratureRule::Consistent,
+            Quadrature::Paper => QuadratureRule::Paper,
+        };
+        let d = HarmonicOptions::default();
+        let harmonic = HarmonicOptions {
+            offset: b.offset.unwrap_or(d.offset),
+            edge_samples: b.edge_samples.unwrap_or(d.edge_samples),
+            quadrature_order: b.quadrature_order.unwrap_or(d.quadrature_order),
+            ..d
+        };
+        Ok(BasisOptions { family, quadrature, harmonic, ..Default::default() })
+    }
+
+    /// The engine's simulation parameters of the scene.
+    pub fn params(&self, s: &LoadedScene) -> Result<SimulationParams, SceneError> {
+        let sim = &self.simulation;
+        Ok(SimulationParams {
+            material: self.material(),
+            gravity: sim.gravity,
+            basis: self.basis_options(s)?,
+            dt: sim.dt,
+            mass_damping: sim.damping.mass,
+            stiffness_damping: sim.damping.stiffness,
+            corotated: sim.corotated,
+            solver: self.solver.kind.kind(),
+            tolerance: self.solver.tolerance,
+            max_iterations: self.solver.max_iterations,
+            ..Default::default()
+        })
+    }
+
+    /// The frame formats of the scene (all implemented, checked at load).
+    pub fn formats(&self) -> Vec<Format> {
+        self.output.formats.iter().filter_map(|f| f.format()).collect()
+    }
+}
+
+impl FixedSpec {
+    /// The engine's fixed region.
+    pub fn region(&self) -> FixedRegion {
+        FixedRegion {
+            min: self.region.min,
+            max: self.region.max,
+            displacement: self.displacement,
+            gradient: self.gradient,
+        }
+    }
+}
+
+impl ColliderSpec {
+    /// The engine's collider (checked).
+    pub fn collider(&self) -> Result<Collider, ParamError> {
+        Collider::new(self.plane.point, self.plane.normal, self.stiffness)
+    }
+}
+
+impl PlaneSpec {
+    /// The engine's plane.
+    pub fn plane(&self) -> Plane {
+        Plane { point: self.point, normal: self.normal }
     }
 }

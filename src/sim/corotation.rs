@@ -1,20 +1,17 @@
-//! Stiffness warping (corotated linear elasticity) per element.
+//! Stiffness warping (corotated linear elasticity): the per-element state
+//! of a step.
 //!
 //! For every element: the mean deformation gradient `F = Σ_b x_b ⊗ ḡ_b`
 //! (exact for tetrahedra; the volume average for polyhedra, `ḡ_b` being the
 //! mean shape function gradients), its rotation `R` (polar decomposition,
 //! warm-started from the previous step), the elastic forces
-//!
-//! ```text
-//! f_e = -R K_e (Rᵀ x_e - X_e)                                        [N]
-//! ```
-//!
-//! and, for assembly, the warped blocks `R K_ab Rᵀ`. For tetrahedra
-//! `K_ab = V (λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a·g_b) I)`, so the warped block
-//! is the same formula with rotated gradients `R g_a`, and the force is
-//! `f_a = -V R σ g_a` with `σ = λ tr(ε) I + 2 μ ε`, `ε = sym(Rᵀ F) - I`: no
-//! element matrix is stored or multiplied.
+//! `f_e = -R K_e (Rᵀ x_e - X_e)` (N) and, for assembly, the warped blocks
+//! `R K_ab Rᵀ`. The arithmetic is in [`cleave_kernels::corotation`] and
+//! [`cleave_kernels::rotation`]; this module keeps the state per batch,
+//! aligned with the [`ElementStore`]'s entries across topology changes.
 
+use cleave_kernels::corotation::{deformation_gradients, element_forces_batch, tet_forces, warped_column};
+use cleave_kernels::elasticity::block;
 use cleave_kernels::rotation::{polar_rotations, rotation_matrix};
 use rayon::prelude::*;
 
@@ -22,6 +19,8 @@ use crate::store::{Batch, ElementStore, StoreChanges};
 
 /// Elements per parallel task of the per-element passes.
 const TASK: usize = 256;
+
+const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
 
 /// Per-batch state of the warping.
 #[derive(Clone, Debug, Default)]
@@ -38,9 +37,17 @@ struct BatchState {
     rotated_grads: Vec<[f64; 3]>,
 }
 
-const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-
 impl BatchState {
+    /// Room for `n` entries of a batch of `k`-node elements; new entries
+    /// start at the identity.
+    fn resize(&mut self, n: usize, b: &Batch) {
+        self.quaternion.resize(n, [1.0, 0.0, 0.0, 0.0]);
+        self.rotation.resize(n, IDENTITY);
+        self.gradient.resize(n, IDENTITY);
+        self.force.resize(n * b.k, [0.0; 3]);
+        self.rotated_grads.resize(if b.is_tet() { n * b.k } else { 0 }, [0.0; 3]);
+    }
+
     /// Removes entry `i` of a batch of `k`-node elements; the last entry
     /// takes its place (as [`ElementStore::update`] does).
     fn swap_remove(&mut self, i: usize, k: usize) {
@@ -77,14 +84,13 @@ impl BatchState {
     /// tetrahedra, rotated gradients of the entries `range` of batch `b` at
     /// positions `x` (m); returns the largest number of rotation iterations.
     fn update_range(&mut self, b: &Batch, x: &[[f64; 3]], warp: bool, range: std::ops::Range<usize>) -> usize {
-        let k = b.k;
-        let first = range.start;
-        // 1. deformation gradients
+        let (k, first, end) = (b.k, range.start, range.end);
+        // 1. deformation gradients, SIMD over elements
         self.gradient[range.clone()]
-            .par_iter_mut()
-            .with_min_len(TASK)
-            .enumerate()
-            .for_each(|(j, f)| *f = b.field_gradient(first + j, x));
+            .par_chunks_mut(TASK)
+            .zip(b.nodes[first * k..end * k].par_chunks(TASK * k))
+            .zip(b.stress_grads[first * k..end * k].par_chunks(TASK * k))
+            .for_each(|((f, nodes), grads)| deformation_gradients(k, nodes, x, grads, f));
         // 2. rotations, SIMD over elements, warm-started
         let mut most = 0;
         if warp {
@@ -99,36 +105,27 @@ impl BatchState {
                 .zip(&self.quaternion[range.clone()])
                 .for_each(|(r, q)| *r = rotation_matrix(*q));
         }
-        // 3. forces (and rotated gradients of tetrahedra)
-        let (rotation, gradient) = (&self.rotation, &self.gradient);
-        let forces = &mut self.force[first * k..range.end * k];
+        // 3. forces (and rotated gradients of tetrahedra), SIMD over elements
+        let (rotation, gradient) = (&self.rotation[range.clone()], &self.gradient[range.clone()]);
+        let forces = &mut self.force[first * k..end * k];
         if b.is_tet() {
+            let (lambda, mu) = b.lame;
             forces
-                .par_chunks_mut(k)
-                .zip(self.rotated_grads[first * k..range.end * k].par_chunks_mut(k))
-                .enumerate()
-                .with_min_len(TASK)
-                .for_each(|(j, (f, rg))| {
-                    let i = first + j;
-                    tet_forces(b, i, &rotation[i], &gradient[i], f, rg)
-                });
+                .par_chunks_mut(TASK * k)
+                .zip(self.rotated_grads[first * k..end * k].par_chunks_mut(TASK * k))
+                .zip(rotation.par_chunks(TASK).zip(gradient.par_chunks(TASK)))
+                .zip(b.stress_grads[first * k..end * k].par_chunks(TASK * k).zip(b.volume[range].par_chunks(TASK)))
+                .for_each(|(((f, rg), (r, fg)), (g, v))| tet_forces(r, fg, g, v, lambda, mu, f, rg));
         } else {
-            forces.par_chunks_mut(k).enumerate().with_min_len(TASK / 8).for_each(|(j, f)| {
-                let i = first + j;
-                let r = &rotation[i];
-                let u: Vec<[f64; 3]> = (0..k)
-                    .map(|a| {
-                        let (xa, xr) = (x[b.nodes[i * k + a] as usize], b.rest[i * k + a]);
-                        let l = mat_t_vec(r, xa);
-                        [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
-                    })
-                    .collect();
-                b.apply_stiffness(i, &u, f);
-                for fa in f.iter_mut() {
-                    let w = mat_vec(r, *fa);
-                    *fa = [-w[0], -w[1], -w[2]];
-                }
-            });
+            let chunk = (TASK / 8).max(1);
+            let per = 9 * k * k;
+            forces
+                .par_chunks_mut(chunk * k)
+                .zip(rotation.par_chunks(chunk))
+                .zip(b.nodes[first * k..end * k].par_chunks(chunk * k))
+                .zip(b.rest[first * k..end * k].par_chunks(chunk * k))
+                .zip(b.stiffness[first * per..end * per].par_chunks(chunk * per))
+                .for_each(|((((f, r), nodes), rest), ke)| element_forces_batch(k, nodes, x, rest, ke, r, f));
         }
         most
     }
@@ -140,53 +137,18 @@ pub struct Corotation {
     batches: Vec<BatchState>,
 }
 
-/// `v` as `n` copies of `value`, in the memory it already has.
-fn refill<T: Copy>(v: &mut Vec<T>, n: usize, value: T) {
-    v.clear();
-    v.resize(n, value);
-}
-
-#[inline]
-fn mat_vec(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
-    [
-        m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
-        m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
-        m[6] * v[0] + m[7] * v[1] + m[8] * v[2],
-    ]
-}
-
-#[inline]
-fn mat_t_vec(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
-    [
-        m[0] * v[0] + m[3] * v[1] + m[6] * v[2],
-        m[1] * v[0] + m[4] * v[1] + m[7] * v[2],
-        m[2] * v[0] + m[5] * v[1] + m[8] * v[2],
-    ]
-}
-
 impl Corotation {
     /// Identity rotations for every element of `store`.
     pub fn new(store: &ElementStore) -> Self {
         let mut corotation = Corotation::default();
-        corotation.reset(store);
-        corotation
-    }
-
-    /// Identity rotations for every element of `store` after its elements
-    /// changed, reusing the arrays this already holds.
-    pub fn reset(&mut self, store: &ElementStore) {
-        let identity = IDENTITY;
-        self.batches.resize_with(store.batches.len(), BatchState::default);
-        for (b, st) in store.batches.iter().zip(&mut self.batches) {
-            refill(&mut st.quaternion, b.len(), [1.0, 0.0, 0.0, 0.0]);
-            refill(&mut st.rotation, b.len(), identity);
-            refill(&mut st.gradient, b.len(), identity);
-            refill(&mut st.force, b.len() * b.k, [0.0; 3]);
-            st.rotated_grads.clear();
+        corotation.batches.resize_with(store.batches.len(), BatchState::default);
+        for (b, st) in store.batches.iter().zip(&mut corotation.batches) {
+            st.resize(b.len(), b);
             if b.is_tet() {
-                st.rotated_grads.extend_from_slice(&b.stress_grads);
+                st.rotated_grads.copy_from_slice(&b.stress_grads);
             }
         }
+        corotation
     }
 
     /// Recomputes rotations (if `warp`; identity otherwise) and elastic
@@ -215,22 +177,29 @@ impl Corotation {
         for &(b, start, count) in &changes.appended {
             let (bt, st) = (&store.batches[b as usize], &mut self.batches[b as usize]);
             let end = (start + count) as usize;
-            st.quaternion.resize(end, [1.0, 0.0, 0.0, 0.0]);
-            st.rotation.resize(end, IDENTITY);
-            st.gradient.resize(end, IDENTITY);
-            st.force.resize(end * bt.k, [0.0; 3]);
-            if bt.is_tet() {
-                st.rotated_grads.resize(end * bt.k, [0.0; 3]);
-            }
+            st.resize(end, bt);
             st.update_range(bt, x, warp, start as usize..end);
         }
     }
 
-    /// A rotation per node (row-major): the normalised sum of the
-    /// quaternions of the elements around it, each sign-aligned with the
-    /// first (identity for nodes of no element).
-    pub fn node_frames(&self, store: &ElementStore, num_nodes: usize) -> Vec<[f64; 9]> {
-        let mut sum = vec![[0.0f64; 4]; num_nodes];
+    /// The rotation quaternion of entry `i` of batch `batch`.
+    pub fn quaternion(&self, batch: usize, i: usize) -> [f64; 4] {
+        self.batches[batch].quaternion[i]
+    }
+
+    /// Writes a rotation per node (row-major) into `frames`: the normalised
+    /// sum of the quaternions of the elements around it, each sign-aligned
+    /// with the sum so far (identity for nodes of no element); `sum` is
+    /// scratch. Both are resized to `num_nodes`.
+    pub fn node_frames(
+        &self,
+        store: &ElementStore,
+        num_nodes: usize,
+        sum: &mut Vec<[f64; 4]>,
+        frames: &mut Vec<[f64; 9]>,
+    ) {
+        sum.clear();
+        sum.resize(num_nodes, [0.0; 4]);
         for (b, st) in store.batches.iter().zip(&self.batches) {
             for (i, q) in st.quaternion.iter().enumerate() {
                 for &v in &b.nodes[i * b.k..(i + 1) * b.k] {
@@ -240,13 +209,12 @@ impl Corotation {
                 }
             }
         }
-        sum.iter()
-            .map(|s| {
-                let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
-                let q = if len > 0.0 { s.map(|c| c / len) } else { [1.0, 0.0, 0.0, 0.0] };
-                rotation_matrix(q)
-            })
-            .collect()
+        frames.clear();
+        frames.extend(sum.iter().map(|s| {
+            let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
+            let q = if len > 0.0 { s.map(|c| c / len) } else { [1.0, 0.0, 0.0, 0.0] };
+            rotation_matrix(q)
+        }));
     }
 
     /// Rotation (row-major) of entry `i` of batch `batch` of `store` at
@@ -274,47 +242,19 @@ impl Corotation {
         scale: f64,
         out: &mut [[f64; 9]],
     ) {
-        let bt = &store.batches[batch];
-        let st = &self.batches[batch];
+        let (bt, st) = (&store.batches[batch], &self.batches[batch]);
+        let k = bt.k;
         if bt.is_tet() {
-            // K_ab[p][q] = w (λ g_a[p] g_b[q] + μ g_a[q] g_b[p] + μ δ_pq g_a·g_b)
-            let g = &st.rotated_grads[i * 4..i * 4 + 4];
+            // the isotropic block of the rotated gradients is R K_ab Rᵀ
+            let g = &st.rotated_grads[i * k..(i + 1) * k];
             let w = scale * bt.volume[i];
-            let gb = g[b];
-            let (l, m) = (w * bt.lame.0, w * bt.lame.1);
-            let lgb = [l * gb[0], l * gb[1], l * gb[2]];
-            let mgb = [m * gb[0], m * gb[1], m * gb[2]];
             for (o, ga) in out.iter_mut().zip(g) {
-                let d = ga[0] * mgb[0] + ga[1] * mgb[1] + ga[2] * mgb[2];
-                *o = [
-                    ga[0] * lgb[0] + ga[0] * mgb[0] + d,
-                    ga[0] * lgb[1] + ga[1] * mgb[0],
-                    ga[0] * lgb[2] + ga[2] * mgb[0],
-                    ga[1] * lgb[0] + ga[0] * mgb[1],
-                    ga[1] * lgb[1] + ga[1] * mgb[1] + d,
-                    ga[1] * lgb[2] + ga[2] * mgb[1],
-                    ga[2] * lgb[0] + ga[0] * mgb[2],
-                    ga[2] * lgb[1] + ga[1] * mgb[2],
-                    ga[2] * lgb[2] + ga[2] * mgb[2] + d,
-                ];
+                *o = block(*ga, g[b], w, bt.lame.0, bt.lame.1);
             }
             return;
         }
-        let r = &st.rotation[i];
-        for (a, o) in out.iter_mut().enumerate() {
-            let k = bt.block(i, a, b);
-            // R K Rᵀ
-            let mut rk = [0.0; 9];
-            for p in 0..3 {
-                for q in 0..3 {
-                    rk[3 * p + q] = r[3 * p] * k[q] + r[3 * p + 1] * k[3 + q] + r[3 * p + 2] * k[6 + q];
-                }
-            }
-            *o = std::array::from_fn(|pq| {
-                let (p, q) = (pq / 3, pq % 3);
-                scale * (rk[3 * p] * r[3 * q] + rk[3 * p + 1] * r[3 * q + 1] + rk[3 * p + 2] * r[3 * q + 2])
-            });
-        }
+        let ke = &bt.stiffness[i * 9 * k * k..(i + 1) * 9 * k * k];
+        warped_column(&st.rotation[i], ke, k, b, scale, out);
     }
 
     /// Elastic energy `½ Σ_e (Rᵀx - X)ᵀ K_e (Rᵀx - X)` (J) at positions `x`,
@@ -323,66 +263,30 @@ impl Corotation {
     /// rotations of the positions it started from, which would misstate
     /// the energy of a body turning fast.
     pub fn energy(&self, store: &ElementStore, x: &[[f64; 3]], warp: bool) -> f64 {
-        store
-            .batches
-            .iter()
-            .zip(&self.batches)
-            .map(|(b, st)| {
-                (0..b.len())
-                    .into_par_iter()
-                    .with_min_len(TASK)
-                    .map(|i| {
-                        let k = b.k;
-                        let r = st.rotation_at(b, i, x, warp);
-                        let u: Vec<[f64; 3]> = (0..k)
-                            .map(|a| {
-                                let l = mat_t_vec(&r, x[b.nodes[i * k + a] as usize]);
-                                let xr = b.rest[i * k + a];
-                                [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]]
-                            })
-                            .collect();
-                        let mut f = vec![[0.0; 3]; k];
-                        b.apply_stiffness(i, &u, &mut f);
-                        0.5 * u.iter().zip(&f).map(|(u, f)| u[0] * f[0] + u[1] * f[1] + u[2] * f[2]).sum::<f64>()
-                    })
-                    .collect::<Vec<f64>>()
-                    .iter()
-                    .sum::<f64>()
-            })
-            .sum()
-    }
-}
-
-/// Forces `f_a = -V R σ g_a` and rotated gradients `R g_a` of tetrahedron `i`.
-#[inline]
-fn tet_forces(b: &Batch, i: usize, r: &[f64; 9], f: &[f64; 9], out: &mut [[f64; 3]], rg: &mut [[f64; 3]]) {
-    let (lambda, mu) = b.lame;
-    // M = Rᵀ F, ε = sym(M) - I
-    let mut m = [0.0; 9];
-    for p in 0..3 {
-        for q in 0..3 {
-            m[3 * p + q] = r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q];
-        }
-    }
-    let e = [
-        m[0] - 1.0,
-        0.5 * (m[1] + m[3]),
-        0.5 * (m[2] + m[6]),
-        0.5 * (m[1] + m[3]),
-        m[4] - 1.0,
-        0.5 * (m[5] + m[7]),
-        0.5 * (m[2] + m[6]),
-        0.5 * (m[5] + m[7]),
-        m[8] - 1.0,
-    ];
-    let tr = e[0] + e[4] + e[8];
-    let s: [f64; 9] = std::array::from_fn(|pq| 2.0 * mu * e[pq] + if pq % 4 == 0 { lambda * tr } else { 0.0 });
-    let v = b.volume[i];
-    for a in 0..4 {
-        let g = b.stress_grads[i * 4 + a];
-        let sg = mat_vec(&s, g);
-        let w = mat_vec(r, sg);
-        out[a] = [-v * w[0], -v * w[1], -v * w[2]];
-        rg[a] = mat_vec(r, g);
+        use cleave_kernels::corotation::MAX_NODES;
+        let per_batch = |(b, st): (&Batch, &BatchState)| -> f64 {
+            let k = b.k;
+            let element = |i: usize| -> f64 {
+                let r = st.rotation_at(b, i, x, warp);
+                let (mut u, mut f) = ([[0.0; 3]; MAX_NODES], [[0.0; 3]; MAX_NODES]);
+                for a in 0..k {
+                    let xa = x[b.nodes[i * k + a] as usize];
+                    let l = [
+                        r[0] * xa[0] + r[3] * xa[1] + r[6] * xa[2],
+                        r[1] * xa[0] + r[4] * xa[1] + r[7] * xa[2],
+                        r[2] * xa[0] + r[5] * xa[1] + r[8] * xa[2],
+                    ];
+                    let xr = b.rest[i * k + a];
+                    u[a] = [l[0] - xr[0], l[1] - xr[1], l[2] - xr[2]];
+                }
+                b.apply_stiffness(i, &u[..k], &mut f[..k]);
+                0.5 * u[..k].iter().zip(&f[..k]).map(|(u, f)| u[0] * f[0] + u[1] * f[1] + u[2] * f[2]).sum::<f64>()
+            };
+            // the element energies summed in element order: the same bits on
+            // any number of threads
+            let energies: Vec<f64> = (0..b.len()).into_par_iter().with_min_len(TASK).map(element).collect();
+            energies.iter().sum()
+        };
+        store.batches.iter().zip(&self.batches).map(per_batch).sum()
     }
 }

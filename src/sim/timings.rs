@@ -2,17 +2,24 @@
 
 use std::time::Instant;
 
-/// The phases a simulation reports timings for.
+/// The phases a simulation reports timings for: building element data, the
+/// six phases of a step (see `step.rs`), topology changes and output.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Phase {
     /// Basis functions, quadrature and element matrices.
     Basis,
-    /// Element rotations and elastic forces (stiffness warping).
-    Rotation,
-    /// Pattern building and global assembly.
+    /// Step phase 1: element rotations and elastic forces.
+    Forces,
+    /// Step phase 2 (and pattern building): global assembly.
     Assembly,
-    /// Factorisation and solves.
+    /// Step phase 3: masses, loads and penalty contacts.
+    Contacts,
+    /// Step phase 4: prescribed values.
+    Constraints,
+    /// Step phase 5: analysis, factorisation and solves.
     Solve,
+    /// Step phase 6: the new velocities and positions.
+    Integrate,
     /// Cuts, splits, merges and refinement.
     Topology,
     /// Writing frames and reports.
@@ -25,11 +32,17 @@ pub struct PhaseTimings {
     /// Basis functions, quadrature and element matrices (s).
     pub basis: f64,
     /// Rotations and elastic forces (s).
-    pub rotation: f64,
+    pub forces: f64,
     /// Pattern and assembly (s).
     pub assembly: f64,
-    /// Factorisation and solves (s).
+    /// Masses, loads and contacts (s).
+    pub contacts: f64,
+    /// Constraints (s).
+    pub constraints: f64,
+    /// Analysis, factorisation and solves (s).
     pub solve: f64,
+    /// Integration (s).
+    pub integrate: f64,
     /// Topology changes (s).
     pub topology: f64,
     /// Output (s).
@@ -41,9 +54,12 @@ impl PhaseTimings {
     pub fn add(&mut self, phase: Phase, seconds: f64) {
         *match phase {
             Phase::Basis => &mut self.basis,
-            Phase::Rotation => &mut self.rotation,
+            Phase::Forces => &mut self.forces,
             Phase::Assembly => &mut self.assembly,
+            Phase::Contacts => &mut self.contacts,
+            Phase::Constraints => &mut self.constraints,
             Phase::Solve => &mut self.solve,
+            Phase::Integrate => &mut self.integrate,
             Phase::Topology => &mut self.topology,
             Phase::Output => &mut self.output,
         } += seconds;
@@ -57,8 +73,13 @@ impl PhaseTimings {
         out
     }
 
+    /// The six phases of the steps (s).
+    pub fn steps(&self) -> f64 {
+        self.forces + self.assembly + self.contacts + self.constraints + self.solve + self.integrate
+    }
+
     /// Sum over all phases (s).
     pub fn total(&self) -> f64 {
-        self.basis + self.rotation + self.assembly + self.solve + self.topology + self.output
+        self.basis + self.steps() + self.topology + self.output
     }
 }

@@ -37,6 +37,8 @@ pub struct ConjugateGradient {
     z: Vec<f64>,
     p: Vec<f64>,
     ap: Vec<f64>,
+    /// `Rᵀ r` and `A₀⁻¹ Rᵀ r` of the rotated preconditioner.
+    rotated: Vec<f64>,
     /// The rotated rest-state preconditioner, when chosen.
     rest: Option<RestPreconditioner>,
 }
@@ -64,6 +66,7 @@ impl ConjugateGradient {
             z: Vec::new(),
             p: Vec::new(),
             ap: Vec::new(),
+            rotated: Vec::new(),
             rest: None,
         }
     }
@@ -107,10 +110,11 @@ impl ConjugateGradient {
                     }
                 });
             };
-            let mut t = vec![0.0; r.len()];
-            rotate(&rest.frames, r, &mut t, true);
-            rest.cholesky.solve_in_place(&mut t)?;
-            rotate(&rest.frames, &t, z, false);
+            let t = &mut self.rotated;
+            t.resize(r.len(), 0.0);
+            rotate(&rest.frames, r, t, true);
+            rest.cholesky.solve_in_place(t)?;
+            rotate(&rest.frames, t, z, false);
             return Ok(());
         }
         z.par_chunks_mut(3).zip(r.par_chunks(3)).zip(&self.inverse_blocks).for_each(|((z, r), m)| {
@@ -135,11 +139,26 @@ pub fn symmetric_matvec(a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mut [
     });
 }
 
-/// `Σ a_i b_i`, summed in fixed chunks (deterministic).
+/// Chunk sums [`dot`] keeps on the stack (vectors up to `4096 · 1024`
+/// values); longer vectors keep theirs on the heap.
+const STACK_CHUNKS: usize = 1024;
+
+/// `Σ a_i b_i`, summed in fixed chunks in parallel and the chunk sums in
+/// order (deterministic: the same bits on any number of threads).
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let partial: Vec<f64> =
-        a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)).map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum()).collect();
-    partial.iter().sum()
+    let chunks = a.len().div_ceil(CHUNK);
+    let sum_into = |partial: &mut [f64]| -> f64 {
+        partial
+            .par_iter_mut()
+            .zip(a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)))
+            .for_each(|(s, (x, y))| *s = x.iter().zip(y).map(|(p, q)| p * q).sum());
+        partial.iter().sum()
+    };
+    if chunks <= STACK_CHUNKS {
+        sum_into(&mut [0.0; STACK_CHUNKS][..chunks])
+    } else {
+        sum_into(&mut vec![0.0; chunks])
+    }
 }
 
 /// Inverse of a 3x3 matrix (row-major); the identity where it is singular.

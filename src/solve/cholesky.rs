@@ -24,6 +24,8 @@ pub struct Cholesky {
     symbolic: Option<SymbolicCholesky<usize>>,
     l_values: Vec<f64>,
     scratch: Option<MemBuffer>,
+    /// `b - A x`, for the residual a solve reports.
+    residual: Vec<f64>,
     factored: bool,
     par: Option<Par>,
 }
@@ -112,7 +114,7 @@ impl LinearSolver for Cholesky {
 
     fn solve(
         &mut self,
-        _matrix: SparseColMatRef<'_, usize, f64>,
+        matrix: SparseColMatRef<'_, usize, f64>,
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
@@ -124,7 +126,9 @@ impl LinearSolver for Cholesky {
         if x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        Ok(SolveStats { iterations: 1, residual: f64::NAN })
+        self.residual.resize(b.len(), 0.0);
+        let residual = super::relative_residual(matrix, b, x, &mut self.residual);
+        Ok(SolveStats { iterations: 1, residual })
     }
 }
 

@@ -50,7 +50,7 @@ pub trait LinearSolver: Send {
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError>;
     /// Solves `A x = b` for the matrix last given to `factor`; `x` holds a
     /// starting guess on entry (used by iterative solvers) and the solution
-    /// on exit.
+    /// on exit. The stats report the relative residual reached.
     fn solve(
         &mut self,
         matrix: SparseColMatRef<'_, usize, f64>,
@@ -74,8 +74,7 @@ pub trait LinearSolver: Send {
 }
 
 /// The solvers a simulation can use.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SolverKind {
     /// Cholesky up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`] unknowns, CG above
     /// (measured with `cleave bench`: on the 100k-tet bunny, 53k unknowns,
@@ -106,28 +105,13 @@ pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterat
     }
 }
 
-/// Solves and reports the relative residual: the iterative solver's own,
-/// or, for a direct solver (which reports none), one computed here.
-pub fn solve_checked(
-    solver: &mut dyn LinearSolver,
-    a: SparseColMatRef<'_, usize, f64>,
-    b: &[f64],
-    x: &mut [f64],
-) -> Result<SolveStats, SolveError> {
-    let mut stats = solver.solve(a, b, x)?;
-    if stats.residual.is_nan() {
-        stats.residual = relative_residual(a, b, x);
-    }
-    Ok(stats)
-}
-
 /// Relative residual `|b - A x| / |b|` (`|A x|` when `b` is zero) for
-/// symmetric `A` stored in both triangles.
-pub fn relative_residual(a: SparseColMatRef<'_, usize, f64>, b: &[f64], x: &[f64]) -> f64 {
-    let mut r = vec![0.0; b.len()];
-    symmetric_matvec(a, x, &mut r);
+/// symmetric `A` stored in both triangles; `r` is scratch of `b.len()`
+/// values.
+pub fn relative_residual(a: SparseColMatRef<'_, usize, f64>, b: &[f64], x: &[f64], r: &mut [f64]) -> f64 {
+    symmetric_matvec(a, x, r);
     r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
-    let (nb, nr) = (dot(b, b).sqrt(), dot(&r, &r).sqrt());
+    let (nb, nr) = (dot(b, b).sqrt(), dot(r, r).sqrt());
     if nb > 0.0 {
         nr / nb
     } else {

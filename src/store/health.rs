@@ -44,6 +44,22 @@ impl Default for HealthFloors {
     }
 }
 
+impl HealthFloors {
+    /// Checks every floor is a number `>= 0` (infinity switches the rigid
+    /// residual check off).
+    pub fn check(&self) -> Result<(), crate::param::ParamError> {
+        let floors = [
+            ("stiffness_ratio", self.stiffness_ratio),
+            ("mass_fraction", self.mass_fraction),
+            ("rigid_residual", self.rigid_residual),
+        ];
+        match floors.iter().find(|(_, v)| !(*v >= 0.0)) {
+            Some(&(name, v)) => Err(crate::param::ParamError::new(name, v, "must be a number >= 0")),
+            None => Ok(()),
+        }
+    }
+}
+
 /// Computes `λ₇ / λ_max` of every entry of `batch` into
 /// `batch.stiffness_ratio` and checks every entry against `floors`; on
 /// failure, names the entry with the smallest element id among the failing

@@ -10,9 +10,6 @@ use super::{fill_batch, BasisError, Batch, ElementKind, QuadratureRule, Slots};
 use crate::material::Material;
 use crate::mesh::PolyMesh;
 
-/// Largest vertex count a mean value element may have.
-pub const MAX_VERTICES: usize = 256;
-
 /// Deepest fold a mean value element may have, relative to its diameter
 /// ([`PolyMesh::non_convexity`]): the snapping of cuts bends caps by up to
 /// `SplitOptions::snap` (0.1) of the element they cross, which wicke2007
@@ -44,9 +41,6 @@ pub(super) fn build_batch(
         QuadratureRule::Reference(order) => nt * order.pow(3),
     };
     for &e in &elements {
-        if k > MAX_VERTICES {
-            return Err(BasisError::TooManyVertices { element: e as usize, vertices: k, max: MAX_VERTICES });
-        }
         if !mesh.is_convex(e as usize, CONVEXITY_TOLERANCE) {
             return Err(BasisError::NonConvex { element: e as usize });
         }

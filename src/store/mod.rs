@@ -28,6 +28,7 @@ use thiserror::Error;
 
 use crate::material::Material;
 use crate::mesh::PolyMesh;
+use cleave_kernels::corotation::MAX_NODES;
 
 /// An element the basis cannot be built on.
 #[derive(Clone, Debug, Error, PartialEq)]
@@ -219,9 +220,7 @@ impl Batch {
         let k = self.k;
         if self.is_tet() {
             let g = &self.stress_grads[i * k..(i + 1) * k];
-            let mut out = [0.0; 9];
-            cleave_kernels::elasticity::add_block(&mut out, g[a], g[b], self.volume[i], self.lame.0, self.lame.1);
-            return out;
+            return cleave_kernels::elasticity::block(g[a], g[b], self.volume[i], self.lame.0, self.lame.1);
         }
         let ke = &self.stiffness[i * 9 * k * k..(i + 1) * 9 * k * k];
         let n = 3 * k;
@@ -264,16 +263,10 @@ impl Batch {
     #[inline]
     pub fn field_gradient(&self, i: usize, v: &[[f64; 3]]) -> [f64; 9] {
         let k = self.k;
-        let mut m = [0.0; 9];
-        for a in 0..k {
-            let (va, g) = (v[self.nodes[i * k + a] as usize], self.stress_grads[i * k + a]);
-            for r in 0..3 {
-                for c in 0..3 {
-                    m[3 * r + c] += va[r] * g[c];
-                }
-            }
-        }
-        m
+        let mut f = [[0.0; 9]];
+        let (nodes, grads) = (&self.nodes[i * k..(i + 1) * k], &self.stress_grads[i * k..(i + 1) * k]);
+        cleave_kernels::corotation::deformation_gradients_scalar(k, nodes, v, grads, &mut f);
+        f[0]
     }
 
     /// `K_e u` for entry `i` and element-local displacements `u` (`k`
@@ -321,6 +314,14 @@ pub struct BasisOptions {
     pub health: HealthFloors,
 }
 
+impl BasisOptions {
+    /// Checks the harmonic fit and quadrature and the health floors.
+    pub fn check(&self) -> Result<(), crate::param::ParamError> {
+        self.harmonic.check()?;
+        self.health.check()
+    }
+}
+
 /// How [`ElementStore::update`] moved the batch entries, in the order it
 /// did: per-element state kept beside the store replays it to stay aligned.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -341,6 +342,26 @@ pub struct ElementStore {
     pub batches: Vec<Batch>,
     /// For each mesh element: `(batch, index in batch)`.
     pub locate: Vec<(u32, u32)>,
+}
+
+/// The nodal families' couplings: blocks are nodes, entries are elements
+/// (grouped by batch, identified by their mesh ids).
+impl crate::assembly::Couplings for ElementStore {
+    fn groups(&self) -> usize {
+        self.batches.len()
+    }
+    fn entries(&self, group: usize) -> usize {
+        self.batches[group].len()
+    }
+    fn blocks(&self, group: usize, entry: usize) -> &[u32] {
+        self.batches[group].element_nodes(entry)
+    }
+    fn id(&self, group: usize, entry: usize) -> u32 {
+        self.batches[group].elements[entry]
+    }
+    fn locate(&self, id: u32) -> (u32, u32) {
+        self.locate[id as usize]
+    }
 }
 
 impl ElementStore {
@@ -419,6 +440,9 @@ impl ElementStore {
         for e in elements {
             let (el, e) = (&mesh.elements[e as usize], e as usize);
             let k = el.nodes.len();
+            if k > MAX_NODES {
+                return Err(BasisError::TooManyVertices { element: e, vertices: k, max: MAX_NODES });
+            }
             let kind = match (k, options.family) {
                 (4, _) => ElementKind::LinearTet,
                 (_, Family::MeanValue) => ElementKind::MeanValue,

@@ -9,12 +9,18 @@
 //! sides shared become two boundary faces and the body opens there.
 //! Positions are in the mesh's rest (material) frame.
 
-use super::split::{on_plane_band, split, Plane, SplitError, SplitOptions, SplitReport};
+use super::split::{on_plane_band, split, SplitError, SplitOptions, SplitReport};
+use crate::mesh::Plane;
 use crate::mesh::{Face, PolyMesh};
 
-/// What a plane cut changed.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// What a plane cut changed: everything a simulation needs to bring its
+/// element data, sparse pattern and node state up to date.
+#[derive(Clone, Debug, PartialEq)]
 pub struct CutReport {
+    /// The cut's plane (rest frame).
+    pub plane: Plane,
+    /// The node count before the cut: nodes from this id on are new.
+    pub nodes_before: u32,
     /// The split (new nodes on edges, split elements).
     pub split: SplitReport,
     /// `(original, copy)` for every duplicated node; the copy starts with
@@ -22,6 +28,39 @@ pub struct CutReport {
     pub duplicated: Vec<(u32, u32)>,
     /// Every element whose faces or nodes changed, in increasing order.
     pub touched: Vec<u32>,
+    /// The nodes the touched elements held before the cut, in increasing
+    /// order (the columns of the sparse pattern the cut changes, and the
+    /// nodes whose lumped masses it changes).
+    pub old_nodes: Vec<u32>,
+}
+
+impl CutReport {
+    /// The report of a cut along `plane` of a mesh that had `nodes_before`
+    /// nodes and now is `mesh`: [`CutReport::old_nodes`] are the nodes of
+    /// the touched elements now, each duplicate named by its original,
+    /// less the nodes the cut made. (A cut only adds nodes to an element,
+    /// renames them to their duplicates or hands them to the element's
+    /// other part, which is touched too.)
+    pub(crate) fn new(
+        mesh: &PolyMesh,
+        plane: Plane,
+        nodes_before: usize,
+        split: SplitReport,
+        duplicated: Vec<(u32, u32)>,
+        touched: Vec<u32>,
+    ) -> Self {
+        let nodes_before = nodes_before as u32;
+        let mut original: std::collections::HashMap<u32, u32> = duplicated.iter().map(|&(o, c)| (c, o)).collect();
+        original.retain(|_, o| *o < nodes_before);
+        let mut old_nodes: Vec<u32> = touched
+            .iter()
+            .flat_map(|&e| mesh.elements[e as usize].nodes.iter())
+            .filter_map(|v| if *v < nodes_before { Some(*v) } else { original.get(v).copied() })
+            .collect();
+        old_nodes.sort_unstable();
+        old_nodes.dedup();
+        CutReport { plane, nodes_before, split, duplicated, touched, old_nodes }
+    }
 }
 
 /// The elements a separation along `plane` can involve, in increasing
@@ -84,6 +123,7 @@ pub fn cut_by_plane_keeping(
     opts: &SplitOptions,
     keep_whole: &[u32],
 ) -> Result<CutReport, SplitError> {
+    let nodes_before = mesh.nodes.len();
     let split = split(mesh, plane, None, keep_whole, opts)?;
     let region = cut_region(mesh, plane, &split);
     let side = element_sides(mesh, plane, &region, &split);
@@ -92,7 +132,7 @@ pub fn cut_by_plane_keeping(
     touched.extend(split.repaired_elements.iter().copied());
     touched.sort_unstable();
     touched.dedup();
-    Ok(CutReport { split, duplicated, touched })
+    Ok(CutReport::new(mesh, *plane, nodes_before, split, duplicated, touched))
 }
 
 /// Opens the material between the two sides of a cut: every node that

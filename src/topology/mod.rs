@@ -14,5 +14,5 @@ pub use polygon::{cut_by_polygon, cut_by_polygon_keeping, polygon_plane, Polygon
 pub use rollback::Rollback;
 pub use sliver::{merge_slivers, SliverReport};
 pub(crate) use split::classify_split;
-pub use split::{split_by_plane, split_elements_by_plane, NewNode, Plane, SplitError, SplitOptions, SplitReport};
+pub use split::{split_by_plane, split_elements_by_plane, NewNode, SplitError, SplitOptions, SplitReport};
 pub use transfer::{conserve_momentum, momenta, NodeOrigins};

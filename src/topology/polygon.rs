@@ -18,11 +18,12 @@ use std::collections::HashMap;
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 
 use super::cut::{cut_region, element_sides, separate, CutReport};
-use super::split::{on_plane_band, plane_basis, split, NewNode, Plane, SplitError, SplitOptions, ON_PLANE};
+use super::split::{on_plane_band, plane_basis, split, NewNode, SplitError, SplitOptions, ON_PLANE};
+use crate::mesh::Plane;
 use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
 
 /// What a polygon cut changed, beyond a plane cut's report.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct PolygonCutReport {
     /// Split, new edge nodes (including those on the polygon's edge lines),
     /// duplicated nodes and touched elements.
@@ -170,6 +171,7 @@ pub fn cut_by_polygon_keeping(
         })
         .map(|e| e as u32)
         .collect();
+    let nodes_before = mesh.nodes.len();
     let split = split(mesh, &plane, Some(&chosen), keep_whole, opts)?;
     let protected = |e: &u32| keep_whole.binary_search(e).is_ok();
     let mut new_nodes = split.new_nodes.clone();
@@ -445,6 +447,7 @@ pub fn cut_by_polygon_keeping(
     touched.extend(renamed);
     touched.sort_unstable();
     touched.dedup();
-    let cut = CutReport { split: super::split::SplitReport { new_nodes, ..split }, duplicated, touched };
+    let split = super::split::SplitReport { new_nodes, ..split };
+    let cut = CutReport::new(mesh, plane, nodes_before, split, duplicated, touched);
     Ok(PolygonCutReport { cut, pocket })
 }

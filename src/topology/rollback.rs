@@ -10,7 +10,8 @@
 //! elements and faces, so a cut that fails half-way can be undone in time
 //! proportional to the region it touched.
 
-use super::split::{on_plane_band, Plane};
+use super::split::on_plane_band;
+use crate::mesh::Plane;
 use crate::mesh::{Element, Face, FaceRef, PolyMesh};
 
 /// What a cut may change, saved before it runs (flat, so saving costs no

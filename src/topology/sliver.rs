@@ -32,7 +32,7 @@ use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
 use faer::{Mat, Side};
 
 use super::rollback::Rollback;
-use super::split::Plane;
+use crate::mesh::Plane;
 use crate::mesh::{face_geometry, Face, FaceRef, MeshError, PolyMesh, ValidationOptions};
 
 /// What [`merge_slivers`] did.

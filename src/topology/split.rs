@@ -36,30 +36,7 @@ use std::collections::HashMap;
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 use thiserror::Error;
 
-use crate::mesh::{diameter, fold_depth, quality, Face, FaceRef, PolyMesh};
-
-/// An oriented plane through `point` with normal `normal` (need not be unit).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Plane {
-    /// A point on the plane (m).
-    pub point: [f64; 3],
-    /// The normal; the positive side is where it points.
-    pub normal: [f64; 3],
-}
-
-impl Plane {
-    /// Signed distance of `x` from the plane (m), positive on the normal's
-    /// side.
-    pub fn distance(&self, x: [f64; 3]) -> f64 {
-        dot(sub(x, self.point), self.normal) / norm(self.normal)
-    }
-
-    /// [`Plane::distance`] of every point.
-    pub fn distances(&self, points: &[[f64; 3]]) -> Vec<f64> {
-        let n = scale(self.normal, 1.0 / norm(self.normal));
-        points.iter().map(|&x| dot(sub(x, self.point), n)).collect()
-    }
-}
+use crate::mesh::{diameter, fold_depth, quality, Face, FaceRef, Plane, PolyMesh};
 
 /// Tolerances of a split.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,6 +72,26 @@ impl SplitOptions {
     /// cuts use the defaults).
     pub fn exact() -> Self {
         SplitOptions { snap: 0.0, min_quality: 0.0, min_spacing: 0.0 }
+    }
+
+    /// Checks `snap ∈ [0, 0.5)`, `min_quality ∈ [0, 1)`, `min_spacing ∈
+    /// [0, 0.5)`.
+    pub fn check(&self) -> Result<(), crate::param::ParamError> {
+        use crate::param::ParamError;
+        if !(self.snap >= 0.0 && self.snap < 0.5) {
+            return Err(ParamError::new("snap", self.snap, "must lie in [0, 0.5) (fraction of an element's diameter)"));
+        }
+        if !(self.min_quality >= 0.0 && self.min_quality < 1.0) {
+            return Err(ParamError::new("min_quality", self.min_quality, "must lie in [0, 1)"));
+        }
+        if !(self.min_spacing >= 0.0 && self.min_spacing < 0.5) {
+            return Err(ParamError::new(
+                "min_spacing",
+                self.min_spacing,
+                "must lie in [0, 0.5) (fraction of a diameter)",
+            ));
+        }
+        Ok(())
     }
 }
 

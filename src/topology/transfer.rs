@@ -26,23 +26,30 @@ pub struct NodeOrigins {
 
 impl NodeOrigins {
     /// The origins of the nodes a plane cut made (edge nodes, then
-    /// duplicates), given the node count before it.
-    pub fn of_cut(report: &CutReport, nodes_before: usize) -> Result<Self, String> {
-        Self::of_polygon_cut(&PolygonCutReport { cut: report.clone(), pocket: None }, nodes_before)
+    /// duplicates).
+    pub fn of_cut(report: &CutReport) -> Result<Self, String> {
+        Self::of_made(report, None)
     }
 
     /// The origins of the nodes a polygon cut made: edge nodes, the pocket
     /// node, then duplicates.
-    pub fn of_polygon_cut(report: &PolygonCutReport, nodes_before: usize) -> Result<Self, String> {
-        let cut = &report.cut;
+    pub fn of_polygon_cut(report: &PolygonCutReport) -> Result<Self, String> {
+        Self::of_made(&report.cut, report.pocket.as_ref())
+    }
+
+    /// The origins of a cut's edge nodes and duplicates, and of its pocket
+    /// node (placed among face vertices) if it made one; an error when the
+    /// report's new nodes are not numbered in order from the node count
+    /// before the cut, each from earlier nodes.
+    fn of_made(cut: &CutReport, pocket: Option<&(u32, Vec<u32>)>) -> Result<Self, String> {
         let mut made: Vec<(u32, Vec<(u32, f64)>)> =
             cut.split.new_nodes.iter().map(|nn| (nn.id, vec![(nn.a, 1.0 - nn.t), (nn.b, nn.t)])).collect();
-        if let Some((id, around)) = &report.pocket {
+        if let Some((id, around)) = pocket {
             made.push((*id, around.iter().map(|&v| (v, 1.0 / around.len() as f64)).collect()));
         }
         made.extend(cut.duplicated.iter().map(|&(original, copy)| (copy, vec![(original, 1.0)])));
         made.sort_by_key(|(id, _)| *id);
-        let first = nodes_before as u32;
+        let first = cut.nodes_before;
         for (k, (id, parents)) in made.iter().enumerate() {
             if *id != first + k as u32 || parents.iter().any(|&(p, _)| p >= *id) {
                 return Err(format!("new node {id} is out of order or made from a later node"));

@@ -2,12 +2,12 @@
 #![allow(dead_code)]
 
 use cleave::material::Material;
+use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_tet;
 use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
 use cleave::store::BasisOptions;
-use cleave::topology::Plane;
 use proptest::prelude::*;
 
 /// The path of a file in `assets/`.

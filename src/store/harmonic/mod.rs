@@ -16,6 +16,7 @@ mod element;
 mod face;
 mod mfs;
 
+use crate::param::ParamError;
 use cleave_kernels::harmonic;
 use cleave_kernels::quadrature::{cone_rule, shift_gradients, volume_centroid};
 use cleave_kernels::tet::signed_volume;
@@ -49,6 +50,23 @@ pub struct HarmonicOptions {
 impl Default for HarmonicOptions {
     fn default() -> Self {
         HarmonicOptions { offset: 0.1, edge_samples: 3, quadrature_order: 2, trilinear_hexahedra: true }
+    }
+}
+
+impl HarmonicOptions {
+    /// Checks `offset ∈ (0, 1]`, `edge_samples ∈ 1..=10`,
+    /// `quadrature_order ∈ 1..=6`.
+    pub fn check(&self) -> Result<(), ParamError> {
+        if !(self.offset > 0.0 && self.offset <= 1.0) {
+            return Err(ParamError::new("offset", self.offset, "must be in (0, 1] (fraction of the element size)"));
+        }
+        if !(1..=10).contains(&self.edge_samples) {
+            return Err(ParamError::new("edge_samples", self.edge_samples, "must be in 1..=10"));
+        }
+        if !(1..=6).contains(&self.quadrature_order) {
+            return Err(ParamError::new("quadrature_order", self.quadrature_order, "must be in 1..=6"));
+        }
+        Ok(())
     }
 }
 

@@ -5,6 +5,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod bench;
+
 use cleave::mesh::ValidationOptions;
 use cleave::scene::{run_scene, LoadedScene, RunOptions};
 
@@ -115,7 +117,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Command::Bench { json, threads, quick } => {
             set_threads(threads)?;
-            let report = cleave::bench::run_suite(quick).map_err(|e| e.to_string())?;
+            let report = bench::run_suite(quick).map_err(|e| e.to_string())?;
             println!("{}", report.to_table());
             if let Some(path) = json {
                 let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;

@@ -1,19 +1,26 @@
 //! The throughput suite behind `cleave bench`: wall time of each pipeline
-//! stage on generated meshes, reported with mesh sizes and rates.
+//! stage on generated meshes and the bunny assets (found beside the crate's
+//! manifest, whatever the working directory), reported with mesh sizes and
+//! rates.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::assembly::SparsePattern;
-use crate::material::Material;
-use crate::mesh::{Cell, PolyMesh};
-use crate::meshing::{box_tet, clipped_box};
-use crate::sim::{Collider, Simulation, SimulationParams};
-use crate::solve::{Cholesky, LinearSolver, SolverKind};
-use crate::store::{BasisOptions, ElementStore};
-use crate::topology::{split_by_plane, Plane, SplitOptions};
-use crate::Error;
+use cleave::assembly::SparsePattern;
+use cleave::material::Material;
+use cleave::mesh::{Plane, PolyMesh};
+use cleave::meshing::{box_tet, element_with_vertices, replicate};
+use cleave::sim::{Collider, Simulation, SimulationParams};
+use cleave::solve::{Cholesky, LinearSolver, SolverKind};
+use cleave::store::{BasisOptions, ElementStore};
+use cleave::topology::{split_by_plane, SplitOptions};
+use cleave::Error;
+
+/// A shipped asset, by its path in the crate (`assets/...`).
+fn asset(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets").join(name)
+}
 
 /// One measured stage.
 #[derive(Clone, Debug, Serialize)]
@@ -74,40 +81,6 @@ fn best_ms<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (best, out.expect("at least one repetition"))
 }
 
-/// A single convex element with exactly `k` vertices (a clipped box; the
-/// first seed that gives `k`), or `None`.
-pub fn element_with_vertices(k: usize) -> Option<PolyMesh> {
-    (0..30)
-        .flat_map(|planes| (0..40).map(move |seed| (planes, seed)))
-        .find_map(|(planes, seed)| clipped_box([0.0; 3], [1.0; 3], planes, seed).ok().filter(|m| m.nodes.len() == k))
-}
-
-/// `n` disjoint copies of the single-element `mesh`, side by side.
-pub fn replicate(mesh: &PolyMesh, n: usize) -> Result<PolyMesh, Error> {
-    let k = mesh.nodes.len();
-    let loops: Vec<Vec<u32>> = mesh.elements[0]
-        .faces
-        .iter()
-        .map(|r| {
-            let v = &mesh.faces[r.face as usize].vertices;
-            if r.outward {
-                v.clone()
-            } else {
-                v.iter().rev().copied().collect()
-            }
-        })
-        .collect();
-    let mut nodes = Vec::with_capacity(n * k);
-    let mut cells = Vec::with_capacity(n);
-    for c in 0..n {
-        let shift = [2.0 * (c % 100) as f64, 2.0 * (c / 100) as f64, 0.0];
-        nodes.extend(mesh.nodes.iter().map(|p| [p[0] + shift[0], p[1] + shift[1], p[2]]));
-        let base = (c * k) as u32;
-        cells.push(Cell::Polyhedron(loops.iter().map(|l| l.iter().map(|&v| v + base).collect()).collect()));
-    }
-    Ok(PolyMesh::from_cells(nodes, &cells)?)
-}
-
 /// A basis evaluation kernel to time.
 enum EvalKernel<'a> {
     /// Mean value coordinates, SIMD.
@@ -115,7 +88,7 @@ enum EvalKernel<'a> {
     /// Mean value coordinates, the scalar reference.
     MeanValueScalar,
     /// Fitted harmonic functions, SIMD.
-    Harmonic(&'a crate::store::harmonic::ElementBasis),
+    Harmonic(&'a cleave::store::harmonic::ElementBasis),
 }
 
 /// Wall time (ms) of evaluating `kernel` at the paper's points of `mesh`'s
@@ -160,7 +133,7 @@ fn per_element(copies: usize, k: usize, name: String, ms: f64, extra: Option<(St
 /// element on one thread and on all, and the evaluation kernel per point
 /// against the mean value kernel at the same points.
 fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
-    use crate::store::{harmonic, Family, HarmonicOptions};
+    use cleave::store::{harmonic, Family, HarmonicOptions};
     let copies = if quick { 20 } else { 200 };
     let options = BasisOptions {
         family: Family::Harmonic,
@@ -170,7 +143,7 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
     let single = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .map_err(|e| Error::Parameter(format!("thread pool: {e}")))?;
+        .map_err(|e| Error::Internal(format!("a one-thread pool: {e}")))?;
     let mut out = Vec::new();
     for k in [8, 12, 24, 40] {
         let Some(one) = element_with_vertices(k) else { continue };
@@ -182,7 +155,7 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
         // evaluation at the mean value rule's points, against that kernel
         let faces = harmonic::face_bases(&one, &[0], &options.harmonic)?;
         let basis = harmonic::element_basis(&one, 0, &faces, &options.harmonic)
-            .ok_or(crate::store::BasisError::HarmonicFit { element: 0 })?;
+            .ok_or(cleave::store::BasisError::HarmonicFit { element: 0 })?;
         let reps = if quick { 100 } else { 2000 };
         let (mv_ms, points) = basis_eval_ms(&one, reps, EvalKernel::MeanValue);
         let (hm_ms, _) = basis_eval_ms(&one, reps, EvalKernel::Harmonic(&basis));
@@ -201,7 +174,7 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
 }
 
 /// Runs the suite (`quick`: small meshes, for smoke tests).
-pub fn run_suite(quick: bool) -> Result<Report, Error> {
+pub(crate) fn run_suite(quick: bool) -> Result<Report, Error> {
     let cells = if quick { [16, 4, 4] } else { [64, 16, 16] };
     let mesh = box_tet([0.0; 3], [4.0, 1.0, 1.0], cells)?;
     let material = Material::new(1e5, 0.3, 1000.0)?;
@@ -286,16 +259,16 @@ pub fn run_suite(quick: bool) -> Result<Report, Error> {
         extra: Some(("polyhedra".into(), (ne - store.batches[0].len()) as f64)),
     });
     // corotated implicit steps: the bunny (if its asset is here) and a box
-    let bunny = std::path::Path::new("assets/bunny_100k.mesh");
+    let bunny = asset("bunny_100k.mesh");
     if !quick && bunny.exists() {
-        let mesh = crate::io::read_mesh(bunny)?;
+        let mesh = cleave::io::read_mesh(&bunny)?;
         out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cg, 20)?);
         out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cholesky, 3)?);
         out.extend(large_cut_measurements(mesh)?);
     }
-    let bunny = std::path::Path::new("assets/bunny_5k.mesh");
+    let bunny = asset("bunny_5k.mesh");
     if bunny.exists() {
-        out.extend(cut_measurements(crate::io::read_mesh(bunny)?)?);
+        out.extend(cut_measurements(cleave::io::read_mesh(&bunny)?)?);
     }
     let cells = if quick { [16, 4, 4] } else { [100, 50, 34] };
     let mesh = box_tet([0.0; 3], [2.0, 1.0, 0.68], cells)?;
@@ -436,12 +409,14 @@ fn step_measurements(label: &str, mesh: PolyMesh, solver: SolverKind, steps: usi
         elements_per_s: ne as f64 / (ms * 1e-3),
         extra,
     };
-    let (rot, asm, sol) =
-        (per(t.rotation, before.rotation), per(t.assembly, before.assembly), per(t.solve, before.solve));
+    let (forces, asm, sol) =
+        (per(t.forces, before.forces), per(t.assembly, before.assembly), per(t.solve, before.solve));
+    let rest = per(t.steps(), before.steps()) - forces - asm - sol;
     Ok(vec![
-        m(format!("step rotations ({kind})"), rot, None),
+        m(format!("step forces ({kind})"), forces, None),
         m(format!("step assembly ({kind})"), asm, None),
+        m(format!("step contacts+constraints+integrate ({kind})"), rest, None),
         m(format!("step solve ({kind})"), sol, Some(("iterations/step".into(), iterations as f64 / steps as f64))),
-        m(format!("step total ({kind})"), rot + asm + sol, None),
+        m(format!("step total ({kind})"), per(t.steps(), before.steps()), None),
     ])
 }

@@ -1,0 +1,181 @@
+//! Figures read back from a simulation without changing it: energies,
+//! momenta, stresses, forces, and the run-health figures (how far its
+//! elements stretch, how fast its nodes move, how light its lightest node
+//! is). A run whose body tears a node away or explodes an element shows it
+//! here before anyone looks at a frame.
+
+use cleave_kernels::elasticity::{stress, von_mises};
+use cleave_kernels::vec3::{cross, norm, sub};
+
+use super::Simulation;
+use crate::mesh::diameter;
+
+/// A figure and where it was found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Located {
+    /// The value.
+    pub value: f64,
+    /// The element or node it belongs to.
+    pub at: usize,
+}
+
+impl Simulation {
+    /// Von Mises stress of every element (Pa): of the corotated mean strain
+    /// `sym(Rᵀ F) - I`, with each element's rotation extracted at the
+    /// current positions (the identity when not corotated).
+    pub fn von_mises(&self) -> Vec<f64> {
+        let (l, m) = self.params.material.lame();
+        let (x, store, corotation) = (&self.state.position, &self.elements.store, &self.elements.corotation);
+        let mut out = vec![0.0; self.mesh.elements.len()];
+        for (bi, b) in store.batches.iter().enumerate() {
+            for i in 0..b.len() {
+                let r = corotation.rotation_at(store, bi, i, x, self.params.corotated);
+                let f = b.field_gradient(i, x);
+                // Rᵀ F - I
+                let g: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                    std::array::from_fn(|q| r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q] - f64::from(p == q))
+                });
+                out[b.elements[i] as usize] = von_mises(stress(g, l, m));
+            }
+        }
+        out
+    }
+
+    /// Elastic energy (J) at the current positions, with each element's
+    /// rotation extracted there (the identity when not corotated).
+    pub fn elastic_energy(&self) -> f64 {
+        self.elements.corotation.energy(&self.elements.store, &self.state.position, self.params.corotated)
+    }
+
+    /// Kinetic energy `½ Σ m_i |v_i|²` (J).
+    pub fn kinetic_energy(&self) -> f64 {
+        let v = &self.state.velocity;
+        self.masses.iter().zip(v).map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
+    }
+
+    /// Linear momentum `Σ m_i v_i` (kg m/s).
+    pub fn linear_momentum(&self) -> [f64; 3] {
+        let mut p = [0.0; 3];
+        for (m, v) in self.masses.iter().zip(&self.state.velocity) {
+            (0..3).for_each(|i| p[i] += m * v[i]);
+        }
+        p
+    }
+
+    /// Angular momentum `Σ m_i x_i × v_i` about the origin (kg m²/s).
+    pub fn angular_momentum(&self) -> [f64; 3] {
+        let mut l = [0.0; 3];
+        for ((m, x), v) in self.masses.iter().zip(&self.state.position).zip(&self.state.velocity) {
+            let c = cross(*x, *v);
+            (0..3).for_each(|i| l[i] += m * c[i]);
+        }
+        l
+    }
+
+    /// Elastic forces on every node at the current positions (N), with
+    /// rotations extracted there (the identity when not corotated); the
+    /// simulation keeps the rotations of its last step.
+    pub fn elastic_forces(&self) -> Vec<[f64; 3]> {
+        let (store, mut corotation) = (&self.elements.store, self.elements.corotation.clone());
+        corotation.update(store, &self.state.position, self.params.corotated);
+        let mut f = vec![[0.0; 3]; self.state.position.len()];
+        self.pattern.gather(&mut f, |b, i, a| corotation.force(store, b, i, a));
+        f
+    }
+
+    /// The largest stretch of an element: its deformed diameter over its
+    /// rest diameter (1 for a rigid motion), and the element.
+    pub fn worst_stretch(&self) -> Located {
+        let (mesh, x) = (&self.mesh, &self.state.position);
+        let mut worst = Located { value: 1.0, at: 0 };
+        let mut rest = Vec::new();
+        let mut now = Vec::new();
+        for (e, el) in mesh.elements.iter().enumerate() {
+            rest.clear();
+            now.clear();
+            rest.extend(el.nodes.iter().map(|&v| mesh.nodes[v as usize]));
+            now.extend(el.nodes.iter().map(|&v| x[v as usize]));
+            let stretch = diameter(&now) / diameter(&rest);
+            if stretch > worst.value {
+                worst = Located { value: stretch, at: e };
+            }
+        }
+        worst
+    }
+
+    /// The fastest node: its speed (m/s) and id.
+    pub fn max_node_speed(&self) -> Located {
+        let mut fastest = Located::default();
+        for (i, v) in self.state.velocity.iter().enumerate() {
+            let s = norm(*v);
+            if s > fastest.value {
+                fastest = Located { value: s, at: i };
+            }
+        }
+        fastest
+    }
+
+    /// The lightest node relative to its elements: its lumped mass over
+    /// the mean nodal mass `ρ V_e / k_e` of the elements holding it, and
+    /// the node (nodes of no element are skipped).
+    pub fn min_mass_ratio(&self) -> Located {
+        let n = self.mesh.nodes.len();
+        let (mut sum, mut count) = (vec![0.0; n], vec![0u32; n]);
+        for b in &self.elements.store.batches {
+            for i in 0..b.len() {
+                let share = b.volume[i] * self.params.material.density / b.k as f64;
+                for &v in b.element_nodes(i) {
+                    sum[v as usize] += share;
+                    count[v as usize] += 1;
+                }
+            }
+        }
+        let mut lightest = Located { value: f64::INFINITY, at: 0 };
+        for i in (0..n).filter(|&i| count[i] > 0) {
+            let ratio = self.masses[i] / (sum[i] / count[i] as f64);
+            if ratio < lightest.value {
+                lightest = Located { value: ratio, at: i };
+            }
+        }
+        lightest
+    }
+
+    /// Potential energy of gravity `-Σ m_i g · x_i` (J), zero at the origin.
+    pub fn gravity_energy(&self) -> f64 {
+        let g = self.params.gravity;
+        -self
+            .masses
+            .iter()
+            .zip(&self.state.position)
+            .map(|(m, x)| m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]))
+            .sum::<f64>()
+    }
+
+    /// Energy stored in the penalty springs of the colliders, `Σ ½ k d²`
+    /// over the nodes at depth `d` behind a collider (J).
+    pub fn contact_energy(&self) -> f64 {
+        let mut e = 0.0;
+        for c in &self.boundary.colliders {
+            for x in &self.state.position {
+                let d = c.depth(*x);
+                if d > 0.0 {
+                    e += 0.5 * c.stiffness * d * d;
+                }
+            }
+        }
+        e
+    }
+
+    /// Total mechanical energy: kinetic, elastic, gravity and contact (J).
+    /// Implicit Euler and damping only dissipate it, and a cut changes it
+    /// only by the small amount its state transfer costs, so it should
+    /// never grow (beyond the work of prescribed motion).
+    pub fn mechanical_energy(&self) -> f64 {
+        self.kinetic_energy() + self.elastic_energy() + self.gravity_energy() + self.contact_energy()
+    }
+
+    /// The largest distance a node has moved from its rest position (m).
+    pub fn max_displacement(&self) -> f64 {
+        self.mesh.nodes.iter().zip(&self.state.position).map(|(x0, x)| norm(sub(*x, *x0))).fold(0.0, f64::max)
+    }
+}

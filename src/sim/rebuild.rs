@@ -1,0 +1,161 @@
+//! Topology changes applied to a running simulation, in one place: a cut
+//! changes the mesh, then everything built on it follows in a fixed order
+//! (element data, node state, sparse pattern, masses, momenta, rotations,
+//! the solvers and the boundary surface).
+
+use crate::mesh::{Plane, PolyMesh, ValidationOptions};
+use crate::topology::{
+    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, polygon_plane, CutReport, NodeOrigins,
+    PolygonCutReport, Rollback,
+};
+use crate::Error;
+
+use super::{Phase, PhaseTimings, Simulation, StepSystem, CUT_ATTEMPTS};
+
+impl Simulation {
+    /// Cuts the body along a whole plane given in the rest (material)
+    /// frame: elements the plane crosses are split into convex parts, and
+    /// the two sides separate (wicke2007 §5). New nodes on edges take the
+    /// state interpolated along their edge, duplicated nodes the state of
+    /// their original; only the touched elements' data and the pattern's
+    /// columns of their nodes are rebuilt. On error the simulation is left
+    /// unchanged.
+    pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
+        let opts = self.params.cut;
+        let cut = |mesh: &mut PolyMesh, keep: &[u32]| -> Result<PolygonCutReport, Error> {
+            let cut = cut_by_plane_keeping(mesh, plane, &opts, keep)?;
+            Ok(PolygonCutReport { cut, pocket: None })
+        };
+        self.cut(plane, cut).map(|report| report.cut)
+    }
+
+    /// Cuts the body with a convex planar polygon given in the rest frame
+    /// (wicke2007 §5.2): the material opens only inside the polygon, with a
+    /// pocket where no node lies inside it. A swept blade is a sequence of
+    /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
+    pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
+        let plane = polygon_plane(polygon)?;
+        let opts = self.params.cut;
+        self.cut(&plane, |mesh, keep| Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep)?))
+    }
+
+    /// Runs `cut` (a cut along `plane`, leaving the elements it is given
+    /// whole) on the mesh in place and brings everything else up to date.
+    /// When the element store finds an element the cut made or changed
+    /// unhealthy (see [`crate::store::HealthFloors`]), the cut is undone
+    /// and run again with the element it came from kept whole, up to
+    /// [`CUT_ATTEMPTS`] times; on any other error the mesh is rolled back.
+    fn cut(
+        &mut self,
+        plane: &Plane,
+        cut: impl Fn(&mut PolyMesh, &[u32]) -> Result<PolygonCutReport, Error>,
+    ) -> Result<PolygonCutReport, Error> {
+        let t = std::time::Instant::now();
+        let rebuild = |t: &PhaseTimings| t.basis + t.assembly + t.solve;
+        let before = rebuild(&self.timings);
+        let mut keep_whole: Vec<u32> = Vec::new();
+        let result = loop {
+            let rollback = Rollback::around_plane(&self.mesh, plane);
+            let outcome = match cut(&mut self.mesh, &keep_whole) {
+                Err(error) => Err((None, error)),
+                Ok(report) => match self.apply_cut(&report) {
+                    Ok(()) => Ok(report),
+                    Err(error) => {
+                        let parent = unhealthy_parent(&error, &report.cut);
+                        Err((parent, error))
+                    }
+                },
+            };
+            match outcome {
+                Ok(report) => break Ok(report),
+                Err((Some(parent), _)) if keep_whole.len() + 1 < CUT_ATTEMPTS => {
+                    rollback.restore(&mut self.mesh);
+                    if let Err(at) = keep_whole.binary_search(&parent) {
+                        keep_whole.insert(at, parent);
+                    }
+                    self.cut_retries += 1;
+                }
+                Err((_, error)) => {
+                    rollback.restore(&mut self.mesh);
+                    break Err(error);
+                }
+            }
+        };
+        // the new pattern's analysis (Cholesky ordering and symbolic
+        // factorisation, or the block structure of CG) makes the system
+        // ready; the cut itself stands even if that fails
+        let result = result.and_then(|report| {
+            let (system, pattern) = (&mut self.system, &self.pattern);
+            self.timings.time(Phase::Solve, || system.ensure_analysed(pattern))?;
+            Ok(report)
+        });
+        // rebuilding element data and pattern, and the analysis, are booked
+        // under their own phases
+        let topology = t.elapsed().as_secs_f64() - (rebuild(&self.timings) - before);
+        self.timings.add(Phase::Topology, topology);
+        result
+    }
+
+    /// Checks the touched elements of a cut mesh and rebuilds their data
+    /// (the store checks their health), then carries the state over to the
+    /// new nodes ([`NodeOrigins`]), updates the pattern's columns of their
+    /// nodes and the masses, restores the momenta of the nodes whose masses
+    /// changed, and brings the rotations (untouched elements keep theirs,
+    /// new ones get theirs), the solvers and the boundary surface up to
+    /// date. Nothing but the mesh has changed when it fails.
+    fn apply_cut(&mut self, report: &PolygonCutReport) -> Result<(), Error> {
+        let (mesh, cut) = (&self.mesh, &report.cut);
+        let touched = &cut.touched;
+        // only the touched elements changed (the two sides of a cut carry
+        // coincident nodes by design, which a whole-mesh check would flag)
+        let list: Vec<usize> = touched.iter().map(|&e| e as usize).collect();
+        mesh.check_elements(&list, &ValidationOptions::default())?;
+        let origins = NodeOrigins::of_polygon_cut(report).map_err(|m| Error::Internal(format!("{m} after a cut")))?;
+        if origins.len() != mesh.nodes.len() {
+            let message = format!("{} node states for {} nodes after a cut", origins.len(), mesh.nodes.len());
+            return Err(Error::Internal(message));
+        }
+        let store = &mut self.elements.store;
+        let t = std::time::Instant::now();
+        let changes = store.update(mesh, &self.params.material, &self.params.basis, touched)?;
+        self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
+        // the nodes whose mass changes: those of the touched elements,
+        // before and after
+        let mut changed_nodes = cut.old_nodes.clone();
+        changed_nodes.extend(store.nodes_of(touched));
+        changed_nodes.sort_unstable();
+        changed_nodes.dedup();
+        let old_changed: Vec<u32> = changed_nodes.iter().copied().filter(|&v| v < cut.nodes_before).collect();
+        let state = &mut self.state;
+        let before = momenta(&old_changed, &self.masses, &state.position, &state.velocity);
+        origins.extend(&mut state.displacement);
+        origins.extend(&mut state.velocity);
+        origins.extend(&mut state.previous_velocity);
+        let n = mesh.nodes.len();
+        let t = std::time::Instant::now();
+        self.pattern.update(n, &*store, touched, &cut.old_nodes);
+        self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
+        self.masses = store.lumped_masses(n, self.params.material.density);
+        state.refresh_positions(&mesh.nodes);
+        conserve_momentum(&changed_nodes, &self.masses, &state.position, &mut state.velocity, before);
+        let warp = self.params.corotated;
+        self.elements.corotation.apply_changes(store, &changes, &state.position, warp);
+        let p = &self.params;
+        self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        self.statics = None;
+        self.surface = mesh.boundary_triangles();
+        Ok(())
+    }
+}
+
+/// The element a cut kept whole would have avoided `error`: an unhealthy
+/// element the cut touched is the element with its id, or (a negative
+/// part, appended) the element whose positive part kept the id.
+fn unhealthy_parent(error: &Error, cut: &CutReport) -> Option<u32> {
+    let Error::Basis(b) = error else {
+        return None;
+    };
+    let e = b.element() as u32;
+    cut.touched.binary_search(&e).ok()?;
+    Some(cut.split.split_elements.iter().find(|p| p.1 == e).map_or(e, |p| p.0))
+}

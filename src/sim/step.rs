@@ -1,0 +1,256 @@
+//! One implicit Euler step of corotated elasticity, as six numbered phases,
+//! each timed on its own:
+//!
+//! ```text
+//! 1. forces       rotations R_e at the current positions, elastic forces
+//! 2. assembly     A = (h² + h β) K_R, the warped stiffness
+//! 3. contacts     A += (1 + h α) M, b = M v + h (f_gravity + f_elastic);
+//!                 penalty contacts linearised into A and b
+//! 4. constraints  prescribed velocities eliminated symmetrically
+//! 5. solve        A v⁺ = b, warm-started from 2 v - v⁻
+//! 6. integrate    x⁺ = x + h v⁺
+//! ```
+//!
+//! Every buffer a step writes lives in [`StepSystem`] and is reused: after
+//! the first step of a topology, a step allocates nothing.
+
+use crate::assembly::{Constraints, SparsePattern};
+use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverKind};
+use crate::Error;
+
+use super::{Boundary, Discretization, NodeState, Phase, Simulation};
+
+/// What one time step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepStats {
+    /// The linear solve.
+    pub solve: SolveStats,
+    /// Largest number of rotation iterations of an element group.
+    pub rotation_iterations: usize,
+    /// Nodes in contact with a collider.
+    pub contacts: usize,
+}
+
+/// The linear system of a step, its solver and the buffers every step
+/// reuses (sized per topology).
+pub(crate) struct StepSystem {
+    solver: Box<dyn LinearSolver>,
+    /// Whether the solver has analysed this topology's pattern.
+    analysed: bool,
+    /// Whether the solver holds this topology's rest-state reference.
+    referenced: bool,
+    /// The matrix values on the pattern.
+    pub values: Vec<f64>,
+    rhs: Vec<f64>,
+    /// The unknown velocities (m/s), flat.
+    velocity: Vec<f64>,
+    /// Elastic force per node (N).
+    force: Vec<[f64; 3]>,
+    constraints: Constraints,
+    /// Rest-state matrix of the rotated preconditioner, and a right-hand
+    /// side its constraints write into.
+    reference: Vec<f64>,
+    reference_rhs: Vec<f64>,
+    /// Per-node frames of the rotated preconditioner and their quaternion
+    /// sums.
+    frames: Vec<[f64; 9]>,
+    frame_sums: Vec<[f64; 4]>,
+}
+
+impl StepSystem {
+    /// A system for `pattern` solved by `kind`.
+    pub fn new(kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) -> Self {
+        let n = 3 * pattern.num_blocks;
+        StepSystem {
+            solver: make_solver(kind, n, tolerance, max_iterations),
+            analysed: false,
+            referenced: false,
+            values: vec![0.0; pattern.nnz()],
+            rhs: vec![0.0; n],
+            velocity: vec![0.0; n],
+            force: vec![[0.0; 3]; pattern.num_blocks],
+            constraints: Constraints::free(n),
+            reference: Vec::new(),
+            reference_rhs: Vec::new(),
+            frames: Vec::new(),
+            frame_sums: Vec::new(),
+        }
+    }
+
+    /// Analyses the pattern once per topology (time booked under
+    /// [`Phase::Solve`] by the caller).
+    pub fn ensure_analysed(&mut self, pattern: &SparsePattern) -> Result<(), SolveError> {
+        if !self.analysed {
+            self.solver.analyze(pattern.symbolic.as_ref())?;
+            self.analysed = true;
+        }
+        Ok(())
+    }
+}
+
+impl Simulation {
+    /// Advances one implicit Euler step of corotated elasticity:
+    ///
+    /// ```text
+    /// ((1 + h α) M + (h² + h β) K_R) v⁺ = M v + h (f_gravity + f_elastic(x) + f_contact(x))
+    /// x⁺ = x + h v⁺
+    /// ```
+    ///
+    /// with `K_R` the warped stiffness, `f_elastic = -R K (Rᵀ x - X)`,
+    /// Rayleigh damping `α M + β K_R`, and the penalty contacts linearised
+    /// into the same solve. Prescribed nodes move to their target in one
+    /// step. Errors name the step.
+    pub fn step(&mut self) -> Result<StepStats, Error> {
+        let step = self.steps;
+        self.advance().map_err(|source| Error::Step { step, source })
+    }
+
+    fn advance(&mut self) -> Result<StepStats, SolveError> {
+        let h = self.params.dt;
+        let (c_k, c_m) = (h * h + h * self.params.stiffness_damping, 1.0 + h * self.params.mass_damping);
+        let (pattern, system, timings) = (&self.pattern, &mut self.system, &mut self.timings);
+        let (elements, state, warp) = (&mut self.elements, &self.state, self.params.corotated);
+        // 1.
+        let rotation_iterations = timings.time(Phase::Forces, || forces(elements, pattern, state, warp, system));
+        // 2.
+        timings.time(Phase::Assembly, || assemble(elements, pattern, c_k, system));
+        // 3.
+        let (masses, gravity, boundary) = (&self.masses, self.params.gravity, &self.boundary);
+        let contacts = timings.time(Phase::Contacts, || {
+            inertia_and_loads(pattern, masses, state, gravity, h, c_m, system);
+            contact(pattern, boundary, state, h, system)
+        });
+        // 4.
+        timings.time(Phase::Constraints, || constrain(pattern, boundary, &self.mesh.nodes, masses, state, h, system));
+        // 5.
+        let solve = timings.time(Phase::Solve, || solve(elements, pattern, masses, state, c_m, c_k, system))?;
+        // 6.
+        timings.time(Phase::Integrate, || self.state.integrate(&self.mesh.nodes, &system.velocity, h));
+        self.steps += 1;
+        Ok(StepStats { solve, rotation_iterations, contacts })
+    }
+}
+
+/// Phase 1: rotations and elastic forces at the current positions,
+/// gathered per node; returns the most rotation iterations.
+fn forces(
+    elements: &mut impl Discretization,
+    pattern: &SparsePattern,
+    state: &NodeState,
+    warp: bool,
+    system: &mut StepSystem,
+) -> usize {
+    let iterations = elements.update(&state.position, warp);
+    pattern.gather(&mut system.force, |b, i, a| elements.force(b, i, a));
+    iterations
+}
+
+/// Phase 2: the warped stiffness times `c_k = h² + h β` into the values.
+fn assemble(elements: &impl Discretization, pattern: &SparsePattern, c_k: f64, system: &mut StepSystem) {
+    pattern.assemble(&mut system.values, |b, i, bb, out| elements.stiffness_column(b, i, bb, c_k, out));
+}
+
+/// Phase 3a: the mass `c_m M` on the diagonal and the right-hand side
+/// `M v + h (M g + f)`.
+fn inertia_and_loads(
+    pattern: &SparsePattern,
+    masses: &[f64],
+    state: &NodeState,
+    g: [f64; 3],
+    h: f64,
+    c_m: f64,
+    system: &mut StepSystem,
+) {
+    for (i, &m) in masses.iter().enumerate() {
+        for d in 0..3 {
+            system.values[pattern.diagonal_slot(3 * i + d)] += c_m * m;
+            system.rhs[3 * i + d] = m * state.velocity[i][d] + h * (m * g[d] + system.force[i][d]);
+        }
+    }
+}
+
+/// Phase 3b: every node behind a collider gets the penalty force
+/// `k d n` (into the right-hand side, times `h`) and its linearisation
+/// `h² k n nᵀ` (into the matrix); returns the number of such contacts.
+fn contact(pattern: &SparsePattern, boundary: &Boundary, state: &NodeState, h: f64, system: &mut StepSystem) -> usize {
+    let mut contacts = 0;
+    for c in &boundary.colliders {
+        for (i, xi) in state.position.iter().enumerate() {
+            let depth = c.depth(*xi);
+            if depth > 0.0 {
+                contacts += 1;
+                for r in 0..3 {
+                    system.rhs[3 * i + r] += h * c.stiffness * depth * c.normal[r];
+                    for col in 0..3 {
+                        let slot = pattern.block_slot(i, r, col);
+                        system.values[slot] += h * h * c.stiffness * c.normal[r] * c.normal[col];
+                    }
+                }
+            }
+        }
+    }
+    contacts
+}
+
+/// Phase 4: every prescribed node moves to its target in this step: its
+/// velocity `(u_target - u) / h` is eliminated from the system.
+fn constrain(
+    pattern: &SparsePattern,
+    boundary: &Boundary,
+    rest: &[[f64; 3]],
+    masses: &[f64],
+    state: &NodeState,
+    h: f64,
+    system: &mut StepSystem,
+) {
+    let constraints = &mut system.constraints;
+    constraints.reset(3 * rest.len());
+    boundary.prescribe(rest, masses, &state.displacement, |i, u| {
+        (0..3).for_each(|d| constraints.fix(3 * i + d, (u[d] - state.displacement[i][d]) / h));
+    });
+    constraints.apply(pattern, &mut system.values, &mut system.rhs);
+}
+
+/// Phase 5: the rotated preconditioner's reference and frames when the
+/// solver wants them, then factor and solve, warm-started from the
+/// velocity extrapolated linearly from the last two steps.
+fn solve(
+    elements: &impl Discretization,
+    pattern: &SparsePattern,
+    masses: &[f64],
+    state: &NodeState,
+    c_m: f64,
+    c_k: f64,
+    system: &mut StepSystem,
+) -> Result<SolveStats, SolveError> {
+    system.ensure_analysed(pattern)?;
+    if system.solver.wants_frames() {
+        if !system.referenced {
+            let reference = &mut system.reference;
+            reference.resize(pattern.nnz(), 0.0);
+            pattern.assemble(reference, |b, i, bb, out| {
+                elements.rest_stiffness_column(b, i, bb, out);
+                out.iter_mut().for_each(|blk| blk.iter_mut().for_each(|v| *v *= c_k));
+            });
+            for (i, m) in masses.iter().enumerate() {
+                (0..3).for_each(|d| reference[pattern.diagonal_slot(3 * i + d)] += c_m * m);
+            }
+            system.reference_rhs.resize(3 * masses.len(), 0.0);
+            system.constraints.apply(pattern, reference, &mut system.reference_rhs);
+            system.solver.set_reference(pattern.matrix(reference))?;
+            system.referenced = true;
+        }
+        elements.block_frames(masses.len(), &mut system.frame_sums, &mut system.frames);
+        system.solver.set_frames(&system.frames);
+    }
+    for ((v, now), before) in system.velocity.chunks_exact_mut(3).zip(&state.velocity).zip(&state.previous_velocity) {
+        (0..3).for_each(|d| v[d] = 2.0 * now[d] - before[d]);
+    }
+    let matrix = pattern.matrix(&system.values);
+    system.solver.factor(matrix)?;
+    let stats = system.solver.solve(matrix, &system.rhs, &mut system.velocity)?;
+    if system.velocity.iter().any(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    Ok(stats)
+}
