@@ -2,6 +2,7 @@
 //! `K_e` per element (elements/s) for convex elements with 8, 12, 24 and
 //! 40 vertices, and the evaluation kernel (points/s).
 
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 
 use cleave::material::Material;
@@ -43,7 +44,16 @@ fn evaluation(c: &mut Criterion) {
         let (mut phi, mut grad) = (vec![0.0; k * pts.len()], vec![0.0; 3 * k * pts.len()]);
         group.throughput(Throughput::Elements(pts.len() as u64));
         group.bench_function(BenchmarkId::new("simd", k), |b| {
-            b.iter(|| cleave_kernels::harmonic::evaluate(&basis.functions(), &pts, &mut phi, &mut grad))
+            let mut buf = MemBuffer::new(cleave_kernels::harmonic::evaluate_scratch(k));
+            b.iter(|| {
+                cleave_kernels::harmonic::evaluate(
+                    &basis.functions(),
+                    &pts,
+                    &mut phi,
+                    &mut grad,
+                    MemStack::new(&mut buf),
+                )
+            })
         });
     }
     group.finish();

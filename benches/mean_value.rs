@@ -2,6 +2,7 @@
 //! SIMD and scalar reference) and the element stiffness build
 //! (elements/s) for batches of elements with 8, 12, 16 and 24 vertices.
 
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 
 use cleave::material::Material;
@@ -23,10 +24,12 @@ fn basis(c: &mut Criterion) {
         let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
         group.throughput(Throughput::Elements(nq as u64));
         group.bench_function(BenchmarkId::new("simd", k), |b| {
-            b.iter(|| mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad))
+            let mut buf = MemBuffer::new(mean_value::evaluate_scratch(k));
+            b.iter(|| mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad, MemStack::new(&mut buf)))
         });
         group.bench_function(BenchmarkId::new("scalar", k), |b| {
-            b.iter(|| mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad))
+            let mut buf = MemBuffer::new(mean_value::evaluate_scratch(k));
+            b.iter(|| mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad, MemStack::new(&mut buf)))
         });
     }
     group.finish();

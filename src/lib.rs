@@ -22,6 +22,7 @@
 
 // `!(x > 0.0)` is how this crate rejects NaN together with out-of-range
 // values; `partial_cmp` would hide that intent.
+#![warn(missing_docs)]
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Index loops mirror the formulas (rows, columns, components).
 #![allow(clippy::needless_range_loop)]

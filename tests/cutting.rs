@@ -21,11 +21,28 @@ fn assert_no_sliver(mesh: &PolyMesh) {
     }
 }
 
+/// The report names the node count before the cut and exactly the nodes
+/// its touched elements held before it (what a simulation updates without
+/// taking a snapshot of its own).
+fn assert_old_incidence(before: &PolyMesh, report: &cleave::topology::CutReport) {
+    assert_eq!(report.nodes_before as usize, before.nodes.len());
+    let mut held: Vec<u32> = report
+        .touched
+        .iter()
+        .filter(|&&e| (e as usize) < before.elements.len())
+        .flat_map(|&e| before.elements[e as usize].nodes.iter().copied())
+        .collect();
+    held.sort_unstable();
+    held.dedup();
+    assert_eq!(report.old_nodes, held, "the nodes the touched elements held before the cut");
+}
+
 /// Cuts and checks every invariant of a plane cut.
 fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     let (v0, a0) = (mesh.total_volume(), mesh.boundary_area());
     let before = mesh.clone();
     let report = cut_by_plane(&mut mesh, &plane, &SplitOptions::default()).unwrap();
+    assert_old_incidence(&before, &report);
     // elements the report does not list as touched are exactly as they were
     for e in 0..before.elements.len() {
         if report.touched.binary_search(&(e as u32)).is_err() {
@@ -233,6 +250,7 @@ fn polygon_cut_and_check(mesh: &mut PolyMesh, polygon: &[[f64; 3]]) -> cleave::t
     let v0 = mesh.total_volume();
     let before = mesh.clone();
     let report = cleave::topology::cut_by_polygon(mesh, polygon, &SplitOptions::default()).unwrap();
+    assert_old_incidence(&before, &report.cut);
     let v1 = mesh.total_volume();
     assert!(
         (v1 - v0).abs() <= 1e-12 * v0,

@@ -6,7 +6,8 @@
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{clipped_box, prism};
 use cleave::store::harmonic::{element_basis, face_bases, star_point, ElementBasis, HarmonicOptions};
-use cleave_kernels::harmonic::evaluate;
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
+use cleave_kernels::harmonic::{evaluate, evaluate_scratch};
 use cleave_kernels::quadrature::cone_rule;
 use proptest::prelude::*;
 
@@ -61,7 +62,8 @@ fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Re
     let nodes: Vec<[f64; 3]> = mesh.elements[0].nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
     let nq = pts.len();
     let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
-    evaluate(&b.functions(), pts, &mut phi, &mut grad);
+    let mut buf = MemBuffer::new(evaluate_scratch(b.functions().len()));
+    evaluate(&b.functions(), pts, &mut phi, &mut grad, MemStack::new(&mut buf));
     let size = mesh.element_diameter(0);
     for q in 0..nq {
         let sum: f64 = (0..k).map(|a| phi[a * nq + q]).sum();
@@ -77,7 +79,8 @@ fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Re
         }
     }
     let (mut phi, mut grad) = (vec![0.0; k * k], vec![0.0; 3 * k * k]);
-    evaluate(&b.functions(), &nodes, &mut phi, &mut grad);
+    let mut buf = MemBuffer::new(evaluate_scratch(b.functions().len()));
+    evaluate(&b.functions(), &nodes, &mut phi, &mut grad, MemStack::new(&mut buf));
     let lagrange = (0..k)
         .flat_map(|a| (0..k).map(move |c| (a, c)))
         .map(|(a, c)| (phi[a * k + c] - if a == c { 1.0 } else { 0.0 }).abs())
@@ -122,7 +125,8 @@ fn off_collocation_error(mesh: &PolyMesh, b: &ElementBasis, options: &HarmonicOp
     }
     let nq = points.len();
     let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
-    evaluate(&b.functions(), &points, &mut phi, &mut grad);
+    let mut buf = MemBuffer::new(evaluate_scratch(b.functions().len()));
+    evaluate(&b.functions(), &points, &mut phi, &mut grad, MemStack::new(&mut buf));
     let (mut sum, mut worst, mut count) = (0.0, 0.0f64, 0usize);
     for (q, t) in targets.iter().enumerate() {
         for a in 0..k {

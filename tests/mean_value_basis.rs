@@ -7,7 +7,8 @@ use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_hex;
 use cleave::topology::{split_by_plane, SplitOptions};
-use cleave_kernels::mean_value::{evaluate, evaluate_scalar};
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
+use cleave_kernels::mean_value::{evaluate, evaluate_scalar, evaluate_scratch};
 use cleave_kernels::vec3::{add, dot, norm, scale, sub};
 use proptest::prelude::*;
 
@@ -72,7 +73,8 @@ fn diameter(p: &Polyhedron) -> f64 {
 fn eval(p: &Polyhedron, pts: &[[f64; 3]]) -> (Vec<f64>, Vec<f64>) {
     let k = p.vertices.len();
     let (mut phi, mut grad) = (vec![0.0; k * pts.len()], vec![0.0; 3 * k * pts.len()]);
-    evaluate(&p.vertices, &p.triangles, pts, &mut phi, &mut grad);
+    let mut buf = MemBuffer::new(evaluate_scratch(p.vertices.len()));
+    evaluate(&p.vertices, &p.triangles, pts, &mut phi, &mut grad, MemStack::new(&mut buf));
     (phi, grad)
 }
 
@@ -142,7 +144,8 @@ proptest! {
         let pts = interior_points(&p, seed);
         let (phi, grad) = eval(&p, &pts);
         let (mut phi_s, mut grad_s) = (vec![0.0; phi.len()], vec![0.0; grad.len()]);
-        evaluate_scalar(&p.vertices, &p.triangles, &pts, &mut phi_s, &mut grad_s);
+        let mut buf = MemBuffer::new(evaluate_scratch(p.vertices.len()));
+        evaluate_scalar(&p.vertices, &p.triangles, &pts, &mut phi_s, &mut grad_s, MemStack::new(&mut buf));
         for (a, b) in phi.iter().zip(&phi_s) {
             prop_assert!((a - b).abs() <= 1e-13 * b.abs().max(1.0 / k as f64), "{} vs {}", a, b);
         }

@@ -10,6 +10,7 @@ use cleave::mesh::PolyMesh;
 use cleave::meshing::{box_tet, random_convex};
 use cleave::store::{BasisOptions, ElementStore, QuadratureRule};
 use cleave::topology::{split_by_plane, SplitOptions};
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use cleave_kernels::{elasticity, mean_value, quadrature};
 
 mod common;
@@ -28,7 +29,8 @@ fn mean_value_tetrahedron_equals_the_linear_element() {
     let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; 4]);
     let vol = quadrature::paper_rule(&v, &tris, &mut p, &mut w, &mut mu);
     let (mut phi, mut grad) = (vec![0.0; 4 * nq], vec![0.0; 12 * nq]);
-    mean_value::evaluate(&v, &tris, &p, &mut phi, &mut grad);
+    let mut buf = MemBuffer::new(mean_value::evaluate_scratch(v.len()));
+    mean_value::evaluate(&v, &tris, &p, &mut phi, &mut grad, MemStack::new(&mut buf));
     let (mut scratch, mut ke) = (vec![0.0; elasticity::stiffness_scratch_len(4, nq)], vec![0.0; 144]);
     elasticity::element_stiffness(&grad, &w, 4, l, m, &mut scratch, &mut ke);
     let (v6, g) = cleave_kernels::tet::gradients(&[v[0], v[1], v[2], v[3]]).unwrap();

@@ -13,7 +13,7 @@
 //! ```
 //!
 //! A tetrahedron needs no `K_e`: with rotated gradients `R g_a`, its warped
-//! block is the isotropic block formula ([`tet_block`]) and its forces are
+//! block is the isotropic block formula ([`crate::elasticity::block`]) and its forces are
 //! `f_a = -V R σ g_a`, `σ = λ tr(ε) I + 2μ ε`, `ε = sym(Rᵀ F) - I`.
 //!
 //! Data layout: per batch of `n` elements with `k` nodes each, `nodes[e k +
@@ -320,7 +320,7 @@ pub fn tet_forces(
     pulp::Arch::new().dispatch(TetForces { rotations, gradients, grads, volumes, lame: (lambda, mu), forces, rotated });
 }
 
-/// Scalar reference of [`element_forces`].
+/// Scalar reference of [`element_forces_batch`].
 pub fn element_forces_scalar(
     k: usize,
     nodes: &[u32],

@@ -40,8 +40,8 @@ pub fn voigt_matrix(lambda: f64, mu: f64) -> [[f64; 6]; 6] {
 /// The isotropic block `w B_aᵀ C B_b` (N/m, row-major; see the module
 /// docs) for gradients `g_a` (rows), `g_b` (columns), weight `w` (m³, a
 /// quadrature weight or a tetrahedron's volume times a scale) and Lamé
-/// parameters (Pa), evaluated as `g_a[i] (wλ g_b)[j] + g_a[j] (wμ g_b)[i]
-/// + δ_ij g_a · (wμ g_b)`. With gradients rotated by `R` it is the warped
+/// parameters (Pa), evaluated entry by entry as
+/// `g_a[i] (wλ g_b)[j] + g_a[j] (wμ g_b)[i] + δ_ij g_a · (wμ g_b)`. With gradients rotated by `R` it is the warped
 /// block `R K_ab Rᵀ` ([`crate::corotation`]).
 #[inline(always)]
 pub fn block(ga: [f64; 3], gb: [f64; 3], w: f64, lambda: f64, mu: f64) -> [f64; 9] {

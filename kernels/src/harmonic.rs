@@ -19,6 +19,7 @@
 //! layout of [`crate::mean_value`]. Lanes run over points; each lane reads
 //! the same centre and weight, so nothing is gathered.
 
+use dyn_stack::{MemStack, StackReq};
 use pulp::Simd;
 
 use crate::lanes::{Lanes, Real};
@@ -88,11 +89,17 @@ fn accumulate<R: Real>(f: &MfsFunctions, x: [R; 3], acc: &mut [R]) {
     }
 }
 
+/// The workspace [`evaluate`] and [`evaluate_scalar`] need for `k`
+/// functions: `4 k` values of the widest lanes.
+pub fn evaluate_scratch(k: usize) -> StackReq {
+    StackReq::new::<[f64; crate::MAX_LANES]>(4 * k)
+}
+
 /// Scalar reference of [`evaluate`].
-pub fn evaluate_scalar(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64]) {
+pub fn evaluate_scalar(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64], stack: &mut MemStack) {
     let (k, nq) = (f.len(), points.len());
     f.check_layout(nq, phi, grad);
-    let mut acc = vec![0.0; 4 * k];
+    let (mut acc, _) = stack.make_with(4 * k, |_| 0.0);
     for (q, p) in points.iter().enumerate() {
         accumulate(f, *p, &mut acc);
         for a in 0..k {
@@ -109,6 +116,7 @@ struct Evaluate<'a> {
     points: &'a [[f64; 3]],
     phi: &'a mut [f64],
     grad: &'a mut [f64],
+    stack: &'a mut MemStack,
 }
 
 impl pulp::WithSimd for Evaluate<'_> {
@@ -116,10 +124,10 @@ impl pulp::WithSimd for Evaluate<'_> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
-        let Evaluate { f, points, phi, grad } = self;
+        let Evaluate { f, points, phi, grad, stack } = self;
         let (k, nq) = (f.len(), points.len());
         let width = Lanes::<S>::WIDTH;
-        let mut acc = vec![Lanes::splat(simd, 0.0); 4 * k];
+        let (mut acc, _) = stack.make_with(4 * k, |_| Lanes::splat(simd, 0.0));
         for q0 in (0..nq).step_by(width) {
             let (x, n) = Lanes::load_points(simd, points, q0);
             accumulate(f, x, &mut acc);
@@ -137,10 +145,10 @@ impl pulp::WithSimd for Evaluate<'_> {
 /// Values and gradients of the MFS shape functions `f` at `points` (away
 /// from the kernel centres); layout in the module docs. SIMD over points
 /// with the instruction set chosen at run time; bitwise equal to
-/// [`evaluate_scalar`].
-pub fn evaluate(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64]) {
+/// [`evaluate_scalar`]; `stack` holds at least [`evaluate_scratch`].
+pub fn evaluate(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64], stack: &mut MemStack) {
     f.check_layout(points.len(), phi, grad);
-    pulp::Arch::new().dispatch(Evaluate { f, points, phi, grad });
+    pulp::Arch::new().dispatch(Evaluate { f, points, phi, grad, stack });
 }
 
 #[cfg(test)]
@@ -166,14 +174,18 @@ mod tests {
         let pts: Vec<[f64; 3]> = (0..11).map(|i| [0.05 * i as f64, 0.3 - 0.02 * i as f64, 0.1]).collect();
         let n = f.len() * pts.len();
         let (mut phi0, mut grad0) = (vec![0.0; n], vec![0.0; 3 * n]);
-        evaluate_scalar(&f, &pts, &mut phi0, &mut grad0);
+        let mut buf = dyn_stack::MemBuffer::new(evaluate_scratch(f.len()));
+        evaluate_scalar(&f, &pts, &mut phi0, &mut grad0, MemStack::new(&mut buf));
         for level in crate::lanes::levels::available("harmonic") {
             let (mut phi, mut grad) = (vec![0.0; n], vec![0.0; 3 * n]);
-            crate::lanes::levels::run(level, Evaluate { f: &f, points: &pts, phi: &mut phi, grad: &mut grad });
+            crate::lanes::levels::run(
+                level,
+                Evaluate { f: &f, points: &pts, phi: &mut phi, grad: &mut grad, stack: MemStack::new(&mut buf) },
+            );
             assert_eq!((&phi, &grad), (&phi0, &grad0), "{level:?}");
         }
         let (mut phi, mut grad) = (vec![0.0; n], vec![0.0; 3 * n]);
-        evaluate(&f, &pts, &mut phi, &mut grad);
+        evaluate(&f, &pts, &mut phi, &mut grad, MemStack::new(&mut buf));
         assert_eq!((&phi, &grad), (&phi0, &grad0), "the dispatched path");
         let h = 1e-6;
         let nq = pts.len();
@@ -183,8 +195,8 @@ mod tests {
                 lo[i] -= h;
                 hi[i] += h;
                 let (mut pl, mut ph, mut g) = (vec![0.0; 5], vec![0.0; 5], vec![0.0; 15]);
-                evaluate_scalar(&f, &[lo], &mut pl, &mut g);
-                evaluate_scalar(&f, &[hi], &mut ph, &mut g);
+                evaluate_scalar(&f, &[lo], &mut pl, &mut g, MemStack::new(&mut buf));
+                evaluate_scalar(&f, &[hi], &mut ph, &mut g, MemStack::new(&mut buf));
                 for a in 0..f.len() {
                     let fd = (ph[a] - pl[a]) / (2.0 * h);
                     assert!((fd - grad0[(3 * a + i) * nq + q]).abs() < 1e-7, "a {a} i {i} q {q}");

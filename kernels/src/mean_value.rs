@@ -28,6 +28,7 @@
 //! Lanes run over the points of one element: every lane shares the
 //! element's vertices and triangles, so nothing is gathered.
 
+use dyn_stack::{MemStack, StackReq};
 use pulp::Simd;
 
 use crate::dual::Dual;
@@ -121,6 +122,13 @@ fn check_layout(k: usize, triangles: &[[u32; 3]], points: usize, phi: &[f64], gr
     assert_eq!(grad.len(), 3 * k * points, "grad must hold 3 k Q values");
 }
 
+/// The workspace [`evaluate`] and [`evaluate_scalar`] need for an element
+/// with `k` vertices: `5 k` dual numbers of the widest lanes.
+pub fn evaluate_scratch(k: usize) -> StackReq {
+    let dual = StackReq::new::<[f64; 4 * crate::MAX_LANES]>(k);
+    StackReq::all_of(&[StackReq::new::<[f64; 12 * crate::MAX_LANES]>(k), dual, dual])
+}
+
 /// Scalar reference of [`evaluate`] (plain `f64`, `std` functions).
 pub fn evaluate_scalar(
     vertices: &[[f64; 3]],
@@ -128,13 +136,14 @@ pub fn evaluate_scalar(
     points: &[[f64; 3]],
     phi: &mut [f64],
     grad: &mut [f64],
+    stack: &mut MemStack,
 ) {
     let (k, nq) = (vertices.len(), points.len());
     check_layout(k, triangles, nq, phi, grad);
     let z = Dual::constant_of(0.0);
-    let mut u = vec![[z; 3]; k];
-    let mut d = vec![z; k];
-    let mut w = vec![z; k];
+    let (mut u, stack) = stack.make_with(k, |_| [z; 3]);
+    let (mut d, stack) = stack.make_with(k, |_| z);
+    let (mut w, _) = stack.make_with(k, |_| z);
     for (q, p) in points.iter().enumerate() {
         let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
         shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
@@ -153,6 +162,7 @@ struct Evaluate<'a> {
     points: &'a [[f64; 3]],
     phi: &'a mut [f64],
     grad: &'a mut [f64],
+    stack: &'a mut MemStack,
 }
 
 impl pulp::WithSimd for Evaluate<'_> {
@@ -160,13 +170,13 @@ impl pulp::WithSimd for Evaluate<'_> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
-        let Evaluate { vertices, triangles, points, phi, grad } = self;
+        let Evaluate { vertices, triangles, points, phi, grad, stack } = self;
         let (k, nq) = (vertices.len(), points.len());
         let width = Lanes::<S>::WIDTH;
         let z = Dual::constant_of(Lanes::splat(simd, 0.0));
-        let mut u = vec![[z; 3]; k];
-        let mut d = vec![z; k];
-        let mut w = vec![z; k];
+        let (mut u, stack) = stack.make_with(k, |_| [z; 3]);
+        let (mut d, stack) = stack.make_with(k, |_| z);
+        let (mut w, _) = stack.make_with(k, |_| z);
         for q0 in (0..nq).step_by(width) {
             let (x, n) = Lanes::load_points(simd, points, q0);
             let x: [Dual<Lanes<S>>; 3] = std::array::from_fn(|i| Dual::variable(x[i], i));
@@ -184,11 +194,19 @@ impl pulp::WithSimd for Evaluate<'_> {
 
 /// Values and gradients of the mean value shape functions of one element
 /// (`vertices`, outward or consistently oriented `triangles`) at `points`
-/// strictly inside it; layout in the module docs. SIMD over points with the
-/// instruction set chosen at run time.
-pub fn evaluate(vertices: &[[f64; 3]], triangles: &[[u32; 3]], points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64]) {
+/// strictly inside it; layout in the module docs; `stack` holds at least
+/// [`evaluate_scratch`]. SIMD over points with the instruction set chosen
+/// at run time.
+pub fn evaluate(
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    points: &[[f64; 3]],
+    phi: &mut [f64],
+    grad: &mut [f64],
+    stack: &mut MemStack,
+) {
     check_layout(vertices.len(), triangles, points.len(), phi, grad);
-    pulp::Arch::new().dispatch(Evaluate { vertices, triangles, points, phi, grad });
+    pulp::Arch::new().dispatch(Evaluate { vertices, triangles, points, phi, grad, stack });
 }
 
 #[cfg(test)]
@@ -231,15 +249,23 @@ mod tests {
             (0..11).map(|i| [0.1 + 0.07 * i as f64, 0.5 - 0.03 * i as f64, 0.2 + 0.05 * i as f64]).collect();
         let n = v.len() * pts.len();
         let (mut phi0, mut grad0) = (vec![0.0; n], vec![0.0; 3 * n]);
-        evaluate_scalar(&v, &t, &pts, &mut phi0, &mut grad0);
+        let mut buf = dyn_stack::MemBuffer::new(evaluate_scratch(v.len()));
+        evaluate_scalar(&v, &t, &pts, &mut phi0, &mut grad0, MemStack::new(&mut buf));
         for level in crate::lanes::levels::available("mean value") {
             let (mut phi, mut grad) = (vec![0.0; n], vec![0.0; 3 * n]);
-            let op = Evaluate { vertices: &v, triangles: &t, points: &pts, phi: &mut phi, grad: &mut grad };
+            let op = Evaluate {
+                vertices: &v,
+                triangles: &t,
+                points: &pts,
+                phi: &mut phi,
+                grad: &mut grad,
+                stack: MemStack::new(&mut buf),
+            };
             crate::lanes::levels::run(level, op);
             assert_eq!((&phi, &grad), (&phi0, &grad0), "{level:?}");
         }
         let (mut phi, mut grad) = (vec![0.0; n], vec![0.0; 3 * n]);
-        evaluate(&v, &t, &pts, &mut phi, &mut grad);
+        evaluate(&v, &t, &pts, &mut phi, &mut grad, MemStack::new(&mut buf));
         assert_eq!((&phi, &grad), (&phi0, &grad0), "the dispatched path");
     }
 }

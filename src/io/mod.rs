@@ -34,16 +34,38 @@ pub use vtu::{read_vtu, write_vtu, VtuFields};
 pub enum IoError {
     /// The file could not be opened, read or written.
     #[error("{}: {source}", .path.display())]
-    Os { path: PathBuf, source: std::io::Error },
+    Os {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
     /// The file's content does not follow its format.
     #[error("{}:{line}: {message}", .path.display())]
-    Parse { path: PathBuf, line: usize, message: String },
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The line (1-based).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// The file is valid but uses something cleave does not read.
     #[error("{}: {message}", .path.display())]
-    Unsupported { path: PathBuf, message: String },
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// The file was read but the mesh it describes is invalid.
     #[error("{}: invalid mesh: {source}", .path.display())]
-    Mesh { path: PathBuf, source: MeshError },
+    Mesh {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: MeshError,
+    },
 }
 
 impl IoError {
@@ -82,10 +104,13 @@ pub fn read_mesh(path: &Path) -> Result<PolyMesh, IoError> {
     }
 }
 
+/// The whole text of the file at `path`; the error names the file.
 pub fn read_text(path: &Path) -> Result<String, IoError> {
     std::fs::read_to_string(path).map_err(|e| IoError::os(path, e))
 }
 
+/// Writes `text` to `path`, creating its folder; the error names the file
+/// or folder.
 pub fn write_text(path: &Path, text: &str) -> Result<(), IoError> {
     if let Some(dir) = path.parent() {
         if !dir.as_os_str().is_empty() {

@@ -19,46 +19,126 @@ pub enum MeshError {
     Empty,
     /// A box generator was given an empty box or zero cells.
     #[error("a generated box needs min < max on every axis and at least one cell per axis (min {min:?}, max {max:?}, cells {cells:?})")]
-    InvalidBox { min: [f64; 3], max: [f64; 3], cells: [usize; 3] },
+    InvalidBox {
+        /// Box corner (m).
+        min: [f64; 3],
+        /// Box corner (m).
+        max: [f64; 3],
+        /// Cells per axis.
+        cells: [usize; 3],
+    },
     /// A node coordinate is NaN or infinite.
     #[error("node {node} has a non-finite coordinate {position:?}")]
-    NonFiniteNode { node: usize, position: [f64; 3] },
+    NonFiniteNode {
+        /// The node's id.
+        node: usize,
+        /// The position (m).
+        position: [f64; 3],
+    },
     /// A cell refers to a node that does not exist.
     #[error("element {element} refers to node {index}, but the mesh has {nodes} nodes")]
-    NodeIndexOutOfRange { element: usize, index: usize, nodes: usize },
+    NodeIndexOutOfRange {
+        /// The element's id.
+        element: usize,
+        /// The offending index.
+        index: usize,
+        /// How many nodes there are.
+        nodes: usize,
+    },
     /// An element refers to a face that does not exist.
     #[error("element {element} refers to face {index}, but the mesh has {faces} faces")]
-    FaceIndexOutOfRange { element: usize, index: usize, faces: usize },
+    FaceIndexOutOfRange {
+        /// The element's id.
+        element: usize,
+        /// The offending index.
+        index: usize,
+        /// How many faces there are.
+        faces: usize,
+    },
     /// A face loop repeats a vertex or has fewer than three.
     #[error("element {element} has a face with fewer than 3 distinct vertices or a repeated vertex: {vertices:?}")]
-    DegenerateFace { element: usize, vertices: Vec<u32> },
+    DegenerateFace {
+        /// The element's id.
+        element: usize,
+        /// The face's vertices.
+        vertices: Vec<u32>,
+    },
     /// A face has (almost) no area.
     #[error("face {face} has zero area")]
-    ZeroAreaFace { face: usize },
+    ZeroAreaFace {
+        /// The face's id.
+        face: usize,
+    },
     /// A face's vertices are not in one plane.
     #[error("face {face} is not planar: a vertex is {deviation:.3e} m off its plane, more than {tolerance:.1e} of the face size")]
-    NonPlanarFace { face: usize, deviation: f64, tolerance: f64 },
+    NonPlanarFace {
+        /// The face's id.
+        face: usize,
+        /// Largest distance of a vertex from the best plane, relative to the face's diameter.
+        deviation: f64,
+        /// The allowed value.
+        tolerance: f64,
+    },
     /// An element's boundary is not closed.
     #[error("element {element} is not closed: edge ({}, {}) is used by {count} of its faces instead of 2", .edge.0, .edge.1)]
-    OpenElement { element: usize, edge: (u32, u32), count: usize },
+    OpenElement {
+        /// The element's id.
+        element: usize,
+        /// The edge, as its two node ids.
+        edge: (u32, u32),
+        /// How many faces of the element use the edge.
+        count: usize,
+    },
     /// Two faces of an element traverse a shared edge in the same direction.
     #[error("element {element} has inconsistently oriented faces along edge ({}, {}) (fix with PolyMesh::orient)", .edge.0, .edge.1)]
-    InconsistentOrientation { element: usize, edge: (u32, u32) },
+    InconsistentOrientation {
+        /// The element's id.
+        element: usize,
+        /// The edge, as its two node ids.
+        edge: (u32, u32),
+    },
     /// An element's faces are consistently oriented but point inward.
     #[error("element {element} has inward-pointing faces (fix with PolyMesh::orient)")]
-    InwardElement { element: usize },
+    InwardElement {
+        /// The element's id.
+        element: usize,
+    },
     /// An element encloses no volume or is inside out.
     #[error("element {element} has non-positive volume {volume:.3e} m^3")]
-    NonPositiveVolume { element: usize, volume: f64 },
+    NonPositiveVolume {
+        /// The element's id.
+        element: usize,
+        /// The volume (m^3).
+        volume: f64,
+    },
     /// Two nodes are at (almost) the same place.
     #[error("nodes {a} and {b} are duplicates ({distance:.3e} m apart; fix with PolyMesh::weld)")]
-    DuplicateNodes { a: usize, b: usize, distance: f64 },
+    DuplicateNodes {
+        /// One node.
+        a: usize,
+        /// The other node.
+        b: usize,
+        /// Their distance (m).
+        distance: f64,
+    },
     /// A face bounds more than two elements.
     #[error("face {face} is shared by more than two elements (element {element} is the third)")]
-    FaceSharedByMoreThanTwo { face: usize, element: usize },
+    FaceSharedByMoreThanTwo {
+        /// The face's id.
+        face: usize,
+        /// The element's id.
+        element: usize,
+    },
     /// The two elements on an interior face both claim it points out of them.
     #[error("face {face} is oriented outward for both elements {a} and {b}: they overlap")]
-    OverlappingElements { face: usize, a: usize, b: usize },
+    OverlappingElements {
+        /// The face's id.
+        face: usize,
+        /// One element.
+        a: usize,
+        /// The other element.
+        b: usize,
+    },
 }
 
 /// Tolerances of [`PolyMesh::validate`].

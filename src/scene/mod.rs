@@ -21,19 +21,56 @@ use crate::param::ParamError;
 pub enum SceneError {
     /// The scene file could not be read.
     #[error("{}: {source}", .path.display())]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
     /// The TOML is malformed, has an unknown key or a value of the wrong type.
     #[error("{}:{line}: {message}", .path.display())]
-    Parse { path: PathBuf, line: usize, message: String },
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The line (1-based).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// A value is out of its allowed range.
     #[error("{}:{line}: {key} = {value}: {allowed}", .path.display())]
-    Invalid { path: PathBuf, line: usize, key: String, value: String, allowed: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The line (1-based).
+        line: usize,
+        /// The scene key (dotted path).
+        key: String,
+        /// The rejected value.
+        value: String,
+        /// What is allowed.
+        allowed: String,
+    },
     /// A valid key asks for something this build does not do yet.
     #[error("{}:{line}: {key}: {message}", .path.display())]
-    Unsupported { path: PathBuf, line: usize, key: String, message: String },
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// The line (1-based).
+        line: usize,
+        /// The scene key (dotted path).
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
     /// The engine failed while building or running the scene.
     #[error("{}: {source}", .path.display())]
-    Engine { path: PathBuf, source: Box<crate::Error> },
+    Engine {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: Box<crate::Error>,
+    },
 }
 
 /// A parsed scene with the file it came from.

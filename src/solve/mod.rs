@@ -18,13 +18,25 @@ use thiserror::Error;
 pub enum SolveError {
     /// The matrix is not (numerically) positive definite.
     #[error("the system matrix is not positive definite (pivot {pivot} of {n}): is the body unconstrained with zero mass, or a parameter NaN?")]
-    NotPositiveDefinite { pivot: usize, n: usize },
+    NotPositiveDefinite {
+        /// The failing pivot.
+        pivot: usize,
+        /// The system's size.
+        n: usize,
+    },
     /// The symbolic analysis failed.
     #[error("symbolic analysis failed: {0}")]
     Analysis(String),
     /// An iterative solver stopped before reaching its tolerance.
     #[error("the iterative solver did not converge: residual {residual:.3e} after {iterations} iterations (tolerance {tolerance:.1e})")]
-    NotConverged { iterations: usize, residual: f64, tolerance: f64 },
+    NotConverged {
+        /// Iterations run.
+        iterations: usize,
+        /// The relative residual reached.
+        residual: f64,
+        /// The tolerance asked for.
+        tolerance: f64,
+    },
     /// The right-hand side or the solution holds NaN or infinity.
     #[error("the system has a non-finite right-hand side or solution")]
     NonFinite,

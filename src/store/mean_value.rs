@@ -6,6 +6,8 @@ use cleave_kernels::quadrature::{
 };
 use cleave_kernels::{elasticity, mean_value};
 
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
+
 use super::{fill_batch, BasisError, Batch, ElementKind, QuadratureRule, Slots};
 use crate::material::Material;
 use crate::mesh::PolyMesh;
@@ -24,6 +26,8 @@ struct Scratch {
     gram: Vec<f64>,
     moments: Vec<[f64; 3]>,
     mu: Vec<f64>,
+    /// The basis kernel's workspace.
+    stack: MemBuffer,
 }
 
 /// Builds the batch of `k`-vertex mean value elements `elements`.
@@ -51,6 +55,7 @@ pub(super) fn build_batch(
         gram: vec![0.0; elasticity::stiffness_scratch_len(k, nq)],
         moments: vec![[0.0; 3]; k],
         mu: vec![0.0; paper_rule_len(k, nt)],
+        stack: MemBuffer::new(mean_value::evaluate_scratch(k)),
     };
     fill_batch(mesh, material, ElementKind::MeanValue, k, nq, elements, true, scratch, |s, slot| {
         let Slots {
@@ -86,7 +91,7 @@ pub(super) fn build_batch(
             return Err(BasisError::NotStarShaped { element });
         }
         *vol = v;
-        mean_value::evaluate(verts, tris, pts, &mut s.phi, &mut s.grad);
+        mean_value::evaluate(verts, tris, pts, &mut s.phi, &mut s.grad, MemStack::new(&mut s.stack));
         if rule == QuadratureRule::Consistent {
             consistency_correction(verts, tris, wts, &mut s.grad, &mut s.moments);
         }

@@ -35,33 +35,75 @@ use cleave_kernels::corotation::MAX_NODES;
 pub enum BasisError {
     /// The mean value family needs convex elements.
     #[error("element {element} is not convex; mean value elements must be convex (use family = \"harmonic\")")]
-    NonConvex { element: usize },
+    NonConvex {
+        /// The element's id.
+        element: usize,
+    },
     /// More vertices than the kernels accept.
     #[error("element {element} has {vertices} vertices; at most {max} are supported")]
-    TooManyVertices { element: usize, vertices: usize, max: usize },
+    TooManyVertices {
+        /// The element's id.
+        element: usize,
+        /// The face's vertices.
+        vertices: usize,
+        /// The largest vertex count supported.
+        max: usize,
+    },
     /// The element is flat or inverted at rest.
     #[error("element {element} is degenerate (volume {volume:.3e} m^3)")]
-    DegenerateElement { element: usize, volume: f64 },
+    DegenerateElement {
+        /// The element's id.
+        element: usize,
+        /// The volume (m^3).
+        volume: f64,
+    },
     /// No interior point sees the whole boundary, so the element cannot be
     /// split into positive sub-tetrahedra for its quadrature.
     #[error("element {element} is not star-shaped; split it into star-shaped parts")]
-    NotStarShaped { element: usize },
+    NotStarShaped {
+        /// The element's id.
+        element: usize,
+    },
     /// The MFS least-squares system is rank deficient (coincident kernels
     /// or a degenerate face).
     #[error("the harmonic basis of element {element} cannot be fitted (degenerate face or element)")]
-    HarmonicFit { element: usize },
+    HarmonicFit {
+        /// The element's id.
+        element: usize,
+    },
     /// The element stiffness has a soft mode: its seventh eigenvalue is
     /// negligible against its largest.
     #[error("element {element} has a soft mode: λ7/λmax of its stiffness is {ratio:.2e}, below the floor {floor:.0e} (two nodes almost on top of each other, or a sliver)")]
-    SoftElement { element: usize, ratio: f64, floor: f64 },
+    SoftElement {
+        /// The element's id.
+        element: usize,
+        /// λ7/λmax of the element stiffness.
+        ratio: f64,
+        /// The floor it must reach.
+        floor: f64,
+    },
     /// The element stiffness resists a rigid motion.
     #[error("element {element}: its stiffness resists a rigid motion (|K q| / λmax = {residual:.2e})")]
-    RigidModes { element: usize, residual: f64 },
+    RigidModes {
+        /// The element's id.
+        element: usize,
+        /// Largest `|K q| / λmax` over the unit rigid modes `q`.
+        residual: f64,
+    },
     /// A node gets a negligible share of the element's mass.
     #[error(
         "element {element}: node {node} gets {fraction:.2e} of the mean nodal mass share, below the floor {floor:.0e}"
     )]
-    LightNode { element: usize, node: usize, fraction: f64, floor: f64 },
+    LightNode {
+        /// The element's id.
+        element: usize,
+        /// The node's id.
+        node: usize,
+        /// The node's share relative to the mean share.
+        fraction: f64,
+        /// The floor it must reach.
+        floor: f64,
+    },
 }
 
 impl BasisError {

@@ -138,13 +138,21 @@ pub enum SplitError {
     InvalidPlane([f64; 3]),
     /// An element the plane crosses is not convex enough to split.
     #[error("element {element} is crossed by the plane but is not convex (face {face} lies in the plane)")]
-    NonConvexElement { element: usize, face: usize },
+    NonConvexElement {
+        /// The element's id.
+        element: usize,
+        /// The face's id.
+        face: usize,
+    },
     /// A cut polygon that cannot be used.
     #[error("the cut polygon {0}")]
     InvalidPolygon(String),
     /// The section of an element is not one polygon of at least 3 corners.
     #[error("element {element}: the plane does not cross it in one polygon")]
-    DegenerateCap { element: usize },
+    DegenerateCap {
+        /// The element's id.
+        element: usize,
+    },
 }
 
 /// Splits every element that `plane` crosses (see the module docs).

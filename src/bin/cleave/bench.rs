@@ -94,6 +94,7 @@ enum EvalKernel<'a> {
 /// Wall time (ms) of evaluating `kernel` at the paper's points of `mesh`'s
 /// single element `reps` times, and the number of points evaluated.
 fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) -> (f64, usize) {
+    use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
     use cleave_kernels::{harmonic, mean_value, quadrature};
     let nodes = &mesh.elements[0].nodes;
     let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
@@ -104,12 +105,17 @@ fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) -> (f64, usiz
     let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; k]);
     quadrature::paper_rule(&verts, &tris, &mut p, &mut w, &mut mu);
     let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
+    let req = mean_value::evaluate_scratch(k).or(harmonic::evaluate_scratch(k));
+    let mut buf = MemBuffer::new(req);
     let (ms, ()) = best_ms(3, || {
         for _ in 0..reps {
+            let stack = MemStack::new(&mut buf);
             match kernel {
-                EvalKernel::MeanValue => mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad),
-                EvalKernel::MeanValueScalar => mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad),
-                EvalKernel::Harmonic(b) => harmonic::evaluate(&b.functions(), &p, &mut phi, &mut grad),
+                EvalKernel::MeanValue => mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad, stack),
+                EvalKernel::MeanValueScalar => {
+                    mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad, stack)
+                }
+                EvalKernel::Harmonic(b) => harmonic::evaluate(&b.functions(), &p, &mut phi, &mut grad, stack),
             }
         }
     });

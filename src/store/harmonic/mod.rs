@@ -17,6 +17,7 @@ mod face;
 mod mfs;
 
 use crate::param::ParamError;
+use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use cleave_kernels::harmonic;
 use cleave_kernels::quadrature::{cone_rule, shift_gradients, volume_centroid};
 use cleave_kernels::tet::signed_volume;
@@ -145,6 +146,8 @@ struct Scratch {
     moments: Vec<[f64; 3]>,
     points: Vec<[f64; 3]>,
     weights: Vec<f64>,
+    /// The basis kernel's workspace.
+    stack: MemBuffer,
 }
 
 /// Builds the batch of `k`-node harmonic elements `elements`; `faces` holds
@@ -166,6 +169,7 @@ pub(super) fn build_batch(
         moments: vec![[0.0; 3]; k],
         points: Vec::with_capacity(nq),
         weights: Vec::with_capacity(nq),
+        stack: MemBuffer::new(harmonic::evaluate_scratch(k)),
     };
     fill_batch(mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
         let Slots { element, verts, triangles, volume, mass_fraction, stiffness, stress_grads, points, weights } = slot;
@@ -183,7 +187,7 @@ pub(super) fn build_batch(
         }
         *volume = v;
         let basis = element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?;
-        harmonic::evaluate(&basis.functions(), points, &mut s.phi, &mut s.grad);
+        harmonic::evaluate(&basis.functions(), points, &mut s.phi, &mut s.grad, MemStack::new(&mut s.stack));
         boundary_moments(mesh, element, faces, &mut s.moments);
         shift_gradients(weights, &mut s.grad, &s.moments);
         elasticity::element_stiffness(&s.grad, weights, k, lambda, mu, &mut s.gram, stiffness);

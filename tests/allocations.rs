@@ -1,0 +1,115 @@
+//! A step allocates nothing once the first step of a topology has sized its
+//! buffers: counted by a global allocator on the threads that run the
+//! steps (the test's and the workers of its own thread pool).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use cleave::material::Material;
+use cleave::mesh::Plane;
+use cleave::meshing::box_tet;
+use cleave::sim::{Collider, FixedRegion, Simulation, SimulationParams};
+use cleave::solve::SolverKind;
+
+/// Counts allocations (and reallocations) of marked threads while
+/// `COUNTING` is set.
+struct Counting;
+
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+thread_local! {
+    static MARKED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count() {
+    if COUNTING.load(Ordering::Relaxed) && MARKED.with(Cell::get) {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: every call is forwarded to the system allocator unchanged.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// Allocations made by `f` on the marked threads.
+fn allocations_of(f: impl FnOnce()) -> usize {
+    ALLOCATIONS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    f();
+    COUNTING.store(false, Ordering::SeqCst);
+    ALLOCATIONS.load(Ordering::SeqCst)
+}
+
+/// A bar of tetrahedra cut once (so mean value polyhedra join them),
+/// clamped at one end, one node pinned, resting on a collider it presses
+/// into.
+fn body(solver: SolverKind) -> Simulation {
+    let mesh = box_tet([0.0; 3], [3.0, 1.0, 1.0], [6, 3, 3]).unwrap();
+    let params = SimulationParams {
+        material: Material::new(1e5, 0.3, 1000.0).unwrap(),
+        solver,
+        tolerance: 1e-8,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(mesh, params).unwrap();
+    sim.fix(FixedRegion::clamp([-1.0; 3], [1e-3, 2.0, 2.0])).unwrap();
+    sim.pin(7, [0.0, 0.0, 0.01]).unwrap();
+    sim.add_collider(Collider::new([0.0, 0.0, 0.02], [0.0, 0.0, 1.0], 1e6).unwrap());
+    sim.cut_plane(&Plane { point: [1.7, 0.5, 0.5], normal: [1.0, 0.3, 0.2] }).unwrap();
+    sim
+}
+
+#[test]
+fn a_step_allocates_nothing_after_the_first() {
+    let pool =
+        rayon::ThreadPoolBuilder::new().num_threads(2).start_handler(|_| MARKED.with(|m| m.set(true))).build().unwrap();
+    MARKED.with(|m| m.set(true));
+    // the counter sees an allocation on the pool's threads
+    let one = pool.install(|| allocations_of(|| drop(std::hint::black_box(Vec::<u64>::with_capacity(8)))));
+    assert_eq!(one, 1, "the counting allocator counts");
+    for solver in [SolverKind::Cholesky, SolverKind::Cg, SolverKind::CgRest] {
+        let mut sim = body(solver);
+        pool.install(|| {
+            sim.step().unwrap();
+            let stats = sim.step().unwrap();
+            assert!(stats.contacts > 0, "{solver:?}: the body presses into the collider");
+            let n = allocations_of(|| {
+                for _ in 0..5 {
+                    sim.step().unwrap();
+                }
+            });
+            assert_eq!(n, 0, "{solver:?}: five steps allocated {n} times");
+        });
+        // a cut changes the sizes: its first step may allocate, the next not
+        sim.cut_plane(&Plane { point: [0.9, 0.5, 0.5], normal: [1.0, -0.2, 0.1] }).unwrap();
+        pool.install(|| {
+            sim.step().unwrap();
+            let n = allocations_of(|| {
+                for _ in 0..3 {
+                    sim.step().unwrap();
+                }
+            });
+            assert_eq!(n, 0, "{solver:?} after a cut: three steps allocated {n} times");
+        });
+    }
+}
