@@ -28,6 +28,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod assembly;
+pub mod dg;
 pub mod io;
 pub mod material;
 pub mod mesh;

@@ -47,7 +47,7 @@ impl System {
     fn cut(&mut self, cut: impl FnOnce(&mut PolyMesh) -> CutReport) {
         let report = cut(&mut self.mesh);
         let old_nodes = self.store.nodes_of(&report.touched);
-        self.store.update(&self.mesh, &material(), &basis(), &report.touched).unwrap();
+        self.store.update(&self.mesh, &material(), &basis(), &report.touched, &[]).unwrap();
         self.pattern.update(self.mesh.nodes.len(), &self.store, &report.touched, &old_nodes);
     }
 

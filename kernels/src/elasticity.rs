@@ -76,10 +76,12 @@ fn check_table(grad: &[f64], weights: &[f64], k: usize, scratch: &[f64], ke: &[f
     assert!(scratch.len() >= stiffness_scratch_len(k, weights.len()), "scratch too small");
 }
 
-/// `K_e` from the Gram matrix `S[r][c] = Σ_q w_q G[r][q] G[c][q]`
-/// (`r = 3a + i`): `K[3a+i][3b+j] = λ S[3a+i][3b+j] + μ S[3a+j][3b+i]
-/// + μ δ_ij Σ_l S[3a+l][3b+l]`. `s` holds the full symmetric `S`.
-fn stiffness_from_gram(s: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]) {
+/// `K_e` (row-major `3k x 3k`, into `ke`) from the Gram matrix of the
+/// gradients `S[r][c] = ∫ G_r G_c` (`r = 3a + i`: component `i` of the
+/// gradient of function `a`), for `k` functions and Lamé parameters `λ`,
+/// `μ`: `K[3a+i][3b+j] = λ S[3a+i][3b+j] + μ S[3a+j][3b+i] + μ δ_ij tr`
+/// with `tr = Σ_l S[3a+l][3b+l]`. `s` holds the full symmetric `S`.
+pub fn stiffness_from_gram(s: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]) {
     let n = 3 * k;
     for a in 0..k {
         for b in 0..k {

@@ -33,6 +33,8 @@ pub mod lanes;
 /// workspace requests are sized for it.
 pub const MAX_LANES: usize = 8;
 pub mod mean_value;
+pub mod moments;
+pub mod polynomial;
 pub mod quadrature;
 pub mod rotation;
 pub mod spectrum;

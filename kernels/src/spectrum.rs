@@ -116,11 +116,32 @@ fn project_out(v: &mut [f64], q: &[f64], n: usize) {
     }
 }
 
+/// How an element's coefficients move rigidly.
+#[derive(Clone, Copy, Debug)]
+pub enum RigidModes<'a> {
+    /// Nodal basis functions (a partition of unity) with their nodes at
+    /// these positions (m): a rigid motion moves every node.
+    Nodal(&'a [[f64; 3]]),
+    /// A polynomial basis whose first function is the constant 1, with the
+    /// coefficients of the identity map `x` given per function (m): a
+    /// translation is the first coefficient, a rotation `ω × X⁰_a`.
+    Modal(&'a [[f64; 3]]),
+}
+
+impl RigidModes<'_> {
+    fn positions(&self) -> &[[f64; 3]] {
+        match self {
+            RigidModes::Nodal(p) | RigidModes::Modal(p) => p,
+        }
+    }
+}
+
 /// The spectrum estimates of the module docs for the row-major `n x n`
-/// stiffness `k_e` (`n = 3 positions.len()`) of an element with nodes at
-/// `positions` (m); `scratch` holds at least [`spectrum_scratch_len`]
-/// values.
-pub fn stiffness_spectrum(k_e: &[f64], positions: &[[f64; 3]], scratch: &mut [f64]) -> Spectrum {
+/// stiffness `k_e` (`n = 3 k`, `k` the number of positions in `modes`);
+/// `scratch` holds at least [`spectrum_scratch_len`] values.
+pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes, scratch: &mut [f64]) -> Spectrum {
+    let positions = modes.positions();
+    let modal = matches!(modes, RigidModes::Modal(_));
     let n = 3 * positions.len();
     assert_eq!(k_e.len(), n * n, "K_e must be 3k x 3k");
     assert!(scratch.len() >= spectrum_scratch_len(positions.len()), "scratch too small");
@@ -131,14 +152,19 @@ pub fn stiffness_spectrum(k_e: &[f64], positions: &[[f64; 3]], scratch: &mut [f6
     let y = &mut rest[..n];
     // 1. rigid modes, orthonormalised
     let k = positions.len();
+    // rotations about the nodes' mean (nodal) or the origin (modal: the
+    // coefficients do not sum to a field, so no shift is a rigid motion)
     let mut c = [0.0; 3];
-    for p in positions {
-        (0..3).for_each(|i| c[i] += p[i] / k as f64);
+    if !modal {
+        for p in positions {
+            (0..3).for_each(|i| c[i] += p[i] / k as f64);
+        }
     }
     for (m, mode) in q.chunks_exact_mut(n).enumerate() {
         for (node, p) in positions.iter().enumerate() {
             let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
             let value = match m {
+                0..=2 if modal => std::array::from_fn(|i| f64::from(i == m && node == 0)),
                 0..=2 => std::array::from_fn(|i| f64::from(i == m)),
                 // e_i × d
                 3 => [0.0, -d[2], d[1]],
@@ -344,7 +370,7 @@ mod tests {
         let mut scratch = vec![0.0; spectrum_scratch_len(positions.len())];
         // reuse the kernel's rigid modes by running it on a zero matrix
         let zero = vec![0.0; n * n];
-        let _ = stiffness_spectrum(&zero, positions, &mut scratch);
+        let _ = stiffness_spectrum(&zero, RigidModes::Nodal(positions), &mut scratch);
         let mut basis: Vec<Vec<f64>> = scratch[n * n..n * n + 6 * n].chunks(n).map(|c| c.to_vec()).collect();
         let mut seed = 12345u64;
         while basis.len() < n {
@@ -384,7 +410,7 @@ mod tests {
         let values: Vec<f64> = (0..n - 6).map(|i| if i == 0 { 1e-3 } else { 0.5 + 0.36 * i as f64 }).collect();
         let k = synthetic(&x, &values);
         let mut scratch = vec![0.0; spectrum_scratch_len(8)];
-        let s = stiffness_spectrum(&k, &x, &mut scratch);
+        let s = stiffness_spectrum(&k, RigidModes::Nodal(&x), &mut scratch);
         let top = values.iter().cloned().fold(0.0, f64::max);
         // power iteration: from below, within a few percent for this evenly
         // spread top of the spectrum (ratio 0.95 between neighbours)
@@ -399,10 +425,10 @@ mod tests {
         let mut values: Vec<f64> = (0..18).map(|i| 1.0 + i as f64).collect();
         values[3] = 0.0;
         let mut scratch = vec![0.0; spectrum_scratch_len(8)];
-        let s = stiffness_spectrum(&synthetic(&x, &values), &x, &mut scratch);
+        let s = stiffness_spectrum(&synthetic(&x, &values), RigidModes::Nodal(&x), &mut scratch);
         assert!(s.ratio() < 1e-12, "{s:?}");
         values[3] = -0.5;
-        let s = stiffness_spectrum(&synthetic(&x, &values), &x, &mut scratch);
+        let s = stiffness_spectrum(&synthetic(&x, &values), RigidModes::Nodal(&x), &mut scratch);
         assert_eq!(s.lambda_7, 0.0, "{s:?}");
     }
 
@@ -416,7 +442,7 @@ mod tests {
             k[d * n + d] += 5.0;
         }
         let mut scratch = vec![0.0; spectrum_scratch_len(8)];
-        let s = stiffness_spectrum(&k, &x, &mut scratch);
+        let s = stiffness_spectrum(&k, RigidModes::Nodal(&x), &mut scratch);
         // |K t_x| = 5 / sqrt(8) against λ_max ≈ 19
         assert!(s.rigid_residual > 0.05, "{s:?}");
     }
@@ -439,7 +465,7 @@ mod tests {
             }
         }
         let mut scratch = vec![0.0; spectrum_scratch_len(4)];
-        let general = stiffness_spectrum(&ke, &x, &mut scratch);
+        let general = stiffness_spectrum(&ke, RigidModes::Nodal(&x), &mut scratch);
         let exact = tet_spectrum(&x, &g, volume, lambda, mu);
         // inverse iteration estimates λ₇ from above, within a few percent
         // where the next eigenvalues lie close (here within 2 %)

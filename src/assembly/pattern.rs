@@ -287,6 +287,20 @@ impl SparsePattern {
         self.symbolic.col_ptr()[3 * j] + self.diagonal[j] as usize + c * self.col_stride[j] + r
     }
 
+    /// Value index of entry `(3 i, 3 j)` of block `(i, j)`, if the pattern
+    /// holds that block: entry `(3 i + r, 3 j + c)` is at `base + c stride
+    /// + r` with [`SparsePattern::column_stride`]`(j)`.
+    pub fn block_offset(&self, i: usize, j: usize) -> Option<usize> {
+        let cp = self.symbolic.col_ptr();
+        let rows = &self.symbolic.row_idx()[cp[3 * j]..cp[3 * j + 1]];
+        rows.binary_search(&(3 * i)).ok().map(|p| cp[3 * j] + p)
+    }
+
+    /// The offset between consecutive scalar columns of block column `j`.
+    pub fn column_stride(&self, j: usize) -> usize {
+        self.col_stride[j]
+    }
+
     /// A matrix view of `values` on this pattern.
     pub fn matrix<'a>(&'a self, values: &'a [f64]) -> SparseColMatRef<'a, usize, f64> {
         SparseColMatRef::new(self.symbolic.as_ref(), values)

@@ -87,7 +87,7 @@ impl LoadedScene {
         let mesh = self.build_mesh()?;
         let s = &self.scene;
         let engine = |e: Error| self.engine(e);
-        let mut sim = Simulation::new(mesh, s.params(self)?).map_err(engine)?;
+        let mut sim = Simulation::new(mesh, s.params()).map_err(engine)?;
         for f in &s.fixed {
             sim.fix(f.region()).map_err(engine)?;
         }

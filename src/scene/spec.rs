@@ -9,6 +9,7 @@ use crate::output::Format;
 use crate::param::ParamError;
 use crate::sim::{Collider, FixedRegion, SimulationParams};
 use crate::solve::SolverKind;
+use crate::store::dg::{DgOptions, Flux as DgFlux};
 use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
 use crate::topology::polygon_plane;
 
@@ -138,6 +139,9 @@ pub struct BasisSpec {
     pub degree: Option<usize>,
     /// DG flux.
     pub flux: Option<Flux>,
+    /// DG penalty `η` (dimensionless; the interior penalty's starting
+    /// value, doubled until the system is positive definite).
+    pub penalty: Option<f64>,
     /// Quadrature of mean value elements.
     #[serde(default)]
     pub quadrature: Quadrature,
@@ -155,6 +159,7 @@ impl Default for BasisSpec {
             family: Family::MeanValue,
             degree: None,
             flux: None,
+            penalty: None,
             quadrature: Quadrature::Consistent,
             offset: None,
             edge_samples: None,
@@ -457,7 +462,7 @@ fn key_of(name: &str) -> String {
         "gravity" | "dt" => format!("simulation.{name}"),
         "mass_damping" | "stiffness_damping" => "simulation.damping".into(),
         "tolerance" | "max_iterations" => format!("solver.{name}"),
-        "offset" | "edge_samples" | "quadrature_order" => format!("basis.{name}"),
+        "offset" | "edge_samples" | "quadrature_order" | "degree" | "penalty" => format!("basis.{name}"),
         _ => "simulation".into(),
     }
 }
@@ -546,9 +551,10 @@ impl Scene {
                 "offset, edge_samples and quadrature_order apply to family = \"harmonic\" only",
             ));
         }
-        let params = self.params(s)?;
-        if self.basis.degree.is_some() || self.basis.flux.is_some() {
-            return Err(s.invalid("basis.degree", "…", "degree and flux apply to family = \"dg\" only"));
+        let params = self.params();
+        let dg_keys = b.degree.is_some() || b.flux.is_some() || b.penalty.is_some();
+        if b.family != Family::Dg && dg_keys {
+            return Err(s.invalid("basis.degree", "…", "degree, flux and penalty apply to family = \"dg\" only"));
         }
         params.check().map_err(|e| s.param(&key_of(e.name), e))?;
         let sim = &self.simulation;
@@ -607,16 +613,13 @@ impl Scene {
         Material { young: self.material.young, poisson: self.material.poisson, density: self.material.density }
     }
 
-    /// The engine's options for the scene's basis; `family = "dg"` is not
-    /// implemented yet.
-    pub fn basis_options(&self, s: &LoadedScene) -> Result<BasisOptions, SceneError> {
+    /// The engine's options for the scene's basis.
+    pub fn basis_options(&self) -> BasisOptions {
         let b = &self.basis;
         let family = match b.family {
             Family::MeanValue => store::Family::MeanValue,
             Family::Harmonic => store::Family::Harmonic,
-            Family::Dg => {
-                return Err(s.unsupported("basis.family", "only \"mean-value\" and \"harmonic\" are implemented yet"))
-            }
+            Family::Dg => store::Family::Dg,
         };
         let quadrature = match b.quadrature {
             Quadrature::Consistent => QuadratureRule::Consistent,
@@ -629,16 +632,26 @@ impl Scene {
             quadrature_order: b.quadrature_order.unwrap_or(d.quadrature_order),
             ..d
         };
-        Ok(BasisOptions { family, quadrature, harmonic, ..Default::default() })
+        let d = DgOptions::default();
+        let dg = DgOptions {
+            degree: b.degree.unwrap_or(d.degree),
+            flux: match b.flux {
+                None => d.flux,
+                Some(Flux::Ip) => DgFlux::Ip,
+                Some(Flux::Bz) => DgFlux::Bz,
+            },
+            penalty: b.penalty.unwrap_or(d.penalty),
+        };
+        BasisOptions { family, quadrature, harmonic, dg, ..Default::default() }
     }
 
     /// The engine's simulation parameters of the scene.
-    pub fn params(&self, s: &LoadedScene) -> Result<SimulationParams, SceneError> {
+    pub fn params(&self) -> SimulationParams {
         let sim = &self.simulation;
-        Ok(SimulationParams {
+        SimulationParams {
             material: self.material(),
             gravity: sim.gravity,
-            basis: self.basis_options(s)?,
+            basis: self.basis_options(),
             dt: sim.dt,
             mass_damping: sim.damping.mass,
             stiffness_damping: sim.damping.stiffness,
@@ -647,7 +660,7 @@ impl Scene {
             tolerance: self.solver.tolerance,
             max_iterations: self.solver.max_iterations,
             ..Default::default()
-        })
+        }
     }
 
     /// The frame formats of the scene (all implemented, checked at load).

@@ -182,6 +182,13 @@ impl Corotation {
         }
     }
 
+    /// The rotation (row-major) of entry `i` of batch `batch` as of the last
+    /// update (the identity before the first, or when not warped).
+    #[inline]
+    pub fn rotation(&self, batch: usize, i: usize) -> &[f64; 9] {
+        &self.batches[batch].rotation[i]
+    }
+
     /// The rotation quaternion of entry `i` of batch `batch`.
     pub fn quaternion(&self, batch: usize, i: usize) -> [f64; 4] {
         self.batches[batch].quaternion[i]

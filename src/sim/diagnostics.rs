@@ -7,7 +7,7 @@
 use cleave_kernels::elasticity::{stress, von_mises};
 use cleave_kernels::vec3::{cross, norm, sub};
 
-use super::Simulation;
+use super::{Discretization, Model, Simulation};
 use crate::mesh::diameter;
 
 /// A figure and where it was found.
@@ -25,7 +25,7 @@ impl Simulation {
     /// current positions (the identity when not corotated).
     pub fn von_mises(&self) -> Vec<f64> {
         let (l, m) = self.params.material.lame();
-        let (x, store, corotation) = (&self.state.position, &self.elements.store, &self.elements.corotation);
+        let (x, store, corotation) = (&self.state.position, self.elements.store(), self.elements.corotation());
         let mut out = vec![0.0; self.mesh.elements.len()];
         for (bi, b) in store.batches.iter().enumerate() {
             for i in 0..b.len() {
@@ -42,9 +42,19 @@ impl Simulation {
     }
 
     /// Elastic energy (J) at the current positions, with each element's
-    /// rotation extracted there (the identity when not corotated).
+    /// rotation extracted there (the identity when not corotated); for DG
+    /// with the quadratic form of the face terms at those rotations.
     pub fn elastic_energy(&self) -> f64 {
-        self.elements.corotation.energy(&self.elements.store, &self.state.position, self.params.corotated)
+        let (x, warp) = (&self.state.position, self.params.corotated);
+        let volume = self.elements.corotation().energy(self.elements.store(), x, warp);
+        match &self.elements {
+            Model::Nodal(_) => volume,
+            Model::Dg(d) => {
+                let mut d = d.clone();
+                d.update(x, warp);
+                volume + d.face_energy(x)
+            }
+        }
     }
 
     /// Kinetic energy `½ Σ m_i |v_i|²` (J).
@@ -53,16 +63,18 @@ impl Simulation {
         self.masses.iter().zip(v).map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])).sum()
     }
 
-    /// Linear momentum `Σ m_i v_i` (kg m/s).
+    /// Linear momentum `Σ w_i v_i` (kg m/s), `w` the gravity weights
+    /// (`ρ ∫ N_i`: the masses for the nodal families).
     pub fn linear_momentum(&self) -> [f64; 3] {
         let mut p = [0.0; 3];
-        for (m, v) in self.masses.iter().zip(&self.state.velocity) {
+        for (m, v) in self.loads.iter().zip(&self.state.velocity) {
             (0..3).for_each(|i| p[i] += m * v[i]);
         }
         p
     }
 
-    /// Angular momentum `Σ m_i x_i × v_i` about the origin (kg m²/s).
+    /// Angular momentum `Σ m_i x_i × v_i` about the origin (kg m²/s) (for
+    /// DG exact: the basis is orthonormal).
     pub fn angular_momentum(&self) -> [f64; 3] {
         let mut l = [0.0; 3];
         for ((m, x), v) in self.masses.iter().zip(&self.state.position).zip(&self.state.velocity) {
@@ -72,21 +84,31 @@ impl Simulation {
         l
     }
 
-    /// Elastic forces on every node at the current positions (N), with
+    /// Elastic forces on every block at the current positions (N), with
     /// rotations extracted there (the identity when not corotated); the
     /// simulation keeps the rotations of its last step.
     pub fn elastic_forces(&self) -> Vec<[f64; 3]> {
-        let (store, mut corotation) = (&self.elements.store, self.elements.corotation.clone());
-        corotation.update(store, &self.state.position, self.params.corotated);
-        let mut f = vec![[0.0; 3]; self.state.position.len()];
-        self.pattern.gather(&mut f, |b, i, a| corotation.force(store, b, i, a));
+        let (x, warp) = (&self.state.position, self.params.corotated);
+        let mut f = vec![[0.0; 3]; x.len()];
+        match &self.elements {
+            Model::Nodal(n) => {
+                let (store, mut corotation) = (&n.store, n.corotation.clone());
+                corotation.update(store, x, warp);
+                self.pattern.gather(&mut f, |b, i, a| corotation.force(store, b, i, a));
+            }
+            Model::Dg(d) => {
+                let mut d = d.clone();
+                d.update(x, warp);
+                self.pattern.gather(&mut f, |b, i, a| d.force(b, i, a));
+            }
+        }
         f
     }
 
     /// The largest stretch of an element: its deformed diameter over its
     /// rest diameter (1 for a rigid motion), and the element.
     pub fn worst_stretch(&self) -> Located {
-        let (mesh, x) = (&self.mesh, &self.state.position);
+        let (mesh, x) = (&self.mesh, self.positions());
         let mut worst = Located { value: 1.0, at: 0 };
         let mut rest = Vec::new();
         let mut now = Vec::new();
@@ -106,7 +128,7 @@ impl Simulation {
     /// The fastest node: its speed (m/s) and id.
     pub fn max_node_speed(&self) -> Located {
         let mut fastest = Located::default();
-        for (i, v) in self.state.velocity.iter().enumerate() {
+        for (i, v) in self.velocities().iter().enumerate() {
             let s = norm(*v);
             if s > fastest.value {
                 fastest = Located { value: s, at: i };
@@ -119,9 +141,13 @@ impl Simulation {
     /// the mean nodal mass `ρ V_e / k_e` of the elements holding it, and
     /// the node (nodes of no element are skipped).
     pub fn min_mass_ratio(&self) -> Located {
+        if self.elements.dg().is_some() {
+            // every function of a DG element has the element's mass
+            return Located { value: 1.0, at: 0 };
+        }
         let n = self.mesh.nodes.len();
         let (mut sum, mut count) = (vec![0.0; n], vec![0u32; n]);
-        for b in &self.elements.store.batches {
+        for b in &self.elements.store().batches {
             for i in 0..b.len() {
                 let share = b.volume[i] * self.params.material.density / b.k as f64;
                 for &v in b.element_nodes(i) {
@@ -140,11 +166,12 @@ impl Simulation {
         lightest
     }
 
-    /// Potential energy of gravity `-Σ m_i g · x_i` (J), zero at the origin.
+    /// Potential energy of gravity `-Σ w_i g · x_i` (J), zero at the
+    /// origin, `w` the gravity weights.
     pub fn gravity_energy(&self) -> f64 {
         let g = self.params.gravity;
         -self
-            .masses
+            .loads
             .iter()
             .zip(&self.state.position)
             .map(|(m, x)| m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]))
@@ -155,11 +182,19 @@ impl Simulation {
     /// over the nodes at depth `d` behind a collider (J).
     pub fn contact_energy(&self) -> f64 {
         let mut e = 0.0;
+        let mut points = Vec::new();
+        let (positions, share): (&[[f64; 3]], Option<&[f64]>) = match &self.contacts {
+            None => (&self.state.position, None),
+            Some((map, share)) => {
+                map.apply(&self.state.position, &mut points);
+                (&points, Some(share))
+            }
+        };
         for c in &self.boundary.colliders {
-            for x in &self.state.position {
+            for (p, x) in positions.iter().enumerate() {
                 let d = c.depth(*x);
                 if d > 0.0 {
-                    e += 0.5 * c.stiffness * d * d;
+                    e += 0.5 * c.stiffness * share.map_or(1.0, |s| s[p]) * d * d;
                 }
             }
         }
@@ -176,6 +211,6 @@ impl Simulation {
 
     /// The largest distance a node has moved from its rest position (m).
     pub fn max_displacement(&self) -> f64 {
-        self.mesh.nodes.iter().zip(&self.state.position).map(|(x0, x)| norm(sub(*x, *x0))).fold(0.0, f64::max)
+        self.mesh.nodes.iter().zip(self.positions()).map(|(x0, x)| norm(sub(*x, *x0))).fold(0.0, f64::max)
     }
 }

@@ -10,6 +10,7 @@
 //! among them) and leaves the step as it is.
 
 use crate::assembly::Couplings;
+use crate::dg::DgElements;
 use crate::store::ElementStore;
 
 use super::Corotation;
@@ -83,5 +84,89 @@ impl Discretization for NodalElements {
     }
     fn block_frames(&self, num_blocks: usize, scratch: &mut Vec<[f64; 4]>, frames: &mut Vec<[f64; 9]>) {
         self.corotation.node_frames(&self.store, num_blocks, scratch, frames)
+    }
+}
+
+/// The discretisation of a body: one of the families.
+#[derive(Clone, Debug)]
+pub enum Model {
+    /// Nodal elements (tetrahedra, mean value, harmonic, trilinear).
+    Nodal(NodalElements),
+    /// Discontinuous Galerkin elements.
+    Dg(Box<DgElements>),
+}
+
+impl Model {
+    /// The element store.
+    pub fn store(&self) -> &ElementStore {
+        match self {
+            Model::Nodal(n) => &n.store,
+            Model::Dg(d) => &d.store,
+        }
+    }
+
+    /// The per-element rotations and forces.
+    pub fn corotation(&self) -> &Corotation {
+        match self {
+            Model::Nodal(n) => &n.corotation,
+            Model::Dg(d) => &d.corotation,
+        }
+    }
+
+    /// The discontinuous Galerkin discretisation, if this is one.
+    pub fn dg(&self) -> Option<&DgElements> {
+        match self {
+            Model::Nodal(_) => None,
+            Model::Dg(d) => Some(d),
+        }
+    }
+}
+
+/// Calls `$body` with `$d` bound to the inner discretisation of `$model`.
+macro_rules! dispatch {
+    ($model:expr, $d:ident => $body:expr) => {
+        match $model {
+            Model::Nodal($d) => $body,
+            Model::Dg($d) => $body,
+        }
+    };
+}
+
+impl Couplings for Model {
+    fn groups(&self) -> usize {
+        dispatch!(self, d => d.groups())
+    }
+    fn entries(&self, group: usize) -> usize {
+        dispatch!(self, d => d.entries(group))
+    }
+    fn blocks(&self, group: usize, entry: usize) -> &[u32] {
+        dispatch!(self, d => d.blocks(group, entry))
+    }
+    fn id(&self, group: usize, entry: usize) -> u32 {
+        dispatch!(self, d => d.id(group, entry))
+    }
+    fn locate(&self, id: u32) -> (u32, u32) {
+        dispatch!(self, d => d.locate(id))
+    }
+}
+
+impl Discretization for Model {
+    fn update(&mut self, x: &[[f64; 3]], warp: bool) -> usize {
+        dispatch!(self, d => d.update(x, warp))
+    }
+    #[inline]
+    fn force(&self, group: usize, entry: usize, local: usize) -> [f64; 3] {
+        dispatch!(self, d => d.force(group, entry, local))
+    }
+    #[inline]
+    fn stiffness_column(&self, group: usize, entry: usize, b: usize, scale: f64, out: &mut [[f64; 9]]) {
+        dispatch!(self, d => d.stiffness_column(group, entry, b, scale, out))
+    }
+    #[inline]
+    fn rest_stiffness_column(&self, group: usize, entry: usize, b: usize, out: &mut [[f64; 9]]) {
+        dispatch!(self, d => d.rest_stiffness_column(group, entry, b, out))
+    }
+    fn block_frames(&self, num_blocks: usize, scratch: &mut Vec<[f64; 4]>, frames: &mut Vec<[f64; 9]>) {
+        dispatch!(self, d => d.block_frames(num_blocks, scratch, frames))
     }
 }

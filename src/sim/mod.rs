@@ -23,6 +23,7 @@ mod corotation;
 mod diagnostics;
 mod discretization;
 mod params;
+mod points;
 mod rebuild;
 mod state;
 mod statics;
@@ -32,8 +33,9 @@ mod timings;
 pub use boundary::{Collider, FixedRegion};
 pub use corotation::Corotation;
 pub use diagnostics::Located;
-pub use discretization::{Discretization, NodalElements};
+pub use discretization::{Discretization, Model, NodalElements};
 pub use params::{SimulationParams, CUT_ATTEMPTS};
+pub use points::PointMap;
 pub use step::StepStats;
 pub use timings::{Phase, PhaseTimings};
 
@@ -43,13 +45,20 @@ use statics::StaticSystem;
 use step::StepSystem;
 
 use crate::assembly::SparsePattern;
+use crate::dg::DgElements;
 use crate::mesh::PolyMesh;
 use crate::param::ParamError;
-use crate::store::ElementStore;
+use crate::store::{ElementStore, Family};
 use crate::Error;
 
 /// One elastic body: its mesh, element data, state, boundary conditions
 /// and the systems of its steps and static solves.
+///
+/// The unknowns come in blocks of three: the nodes of the nodal families,
+/// the polynomial coefficients of the discontinuous Galerkin family. State,
+/// masses and the step work on blocks; what a host reads per node
+/// (positions, displacements, velocities) is the blocks themselves for
+/// the nodal families and the stitched field for DG (kaufmann2008 eq. 17).
 ///
 /// The work is split by concern: the step's phases in `step.rs`, the
 /// static solve in `statics.rs`, topology changes in `rebuild.rs`,
@@ -60,13 +69,23 @@ pub struct Simulation {
     mesh: PolyMesh,
     params: SimulationParams,
     /// Element data and per-element state.
-    elements: NodalElements,
+    elements: Model,
     /// The global sparse structure of this topology.
     pattern: SparsePattern,
-    /// Lumped nodal masses (kg).
+    /// Mass per block (kg): lumped nodal masses, or the exact (diagonal)
+    /// masses of an orthonormal DG basis.
     masses: Vec<f64>,
+    /// Gravity weight per block (kg): the masses for the nodal families,
+    /// `ρ ∫ N_a` for DG.
+    loads: Vec<f64>,
     boundary: Boundary,
+    /// State per block.
     state: NodeState,
+    /// Per-node fields of a discretisation whose blocks are not nodes.
+    nodes: NodeView,
+    /// Collision points of a discretisation whose blocks are not nodes,
+    /// and each point's share of a collider's stiffness.
+    contacts: Option<(PointMap, Vec<f64>)>,
     /// Outward triangles of the boundary surface (node ids), per topology.
     surface: Vec<[u32; 3]>,
     /// The step's system, solver and buffers.
@@ -77,50 +96,129 @@ pub struct Simulation {
     /// Cuts run again with one more element kept whole (see
     /// [`CUT_ATTEMPTS`]).
     cut_retries: usize,
+    /// Faces a DG cut integrated again (the others kept their moments).
+    faces_integrated: usize,
     timings: PhaseTimings,
+}
+
+/// Per-node positions, displacements and velocities read from blocks that
+/// are not nodes, through a point map.
+#[derive(Clone, Debug, Default)]
+struct NodeView {
+    map: PointMap,
+    position: Vec<[f64; 3]>,
+    displacement: Vec<[f64; 3]>,
+    velocity: Vec<[f64; 3]>,
+}
+
+impl NodeView {
+    /// Evaluates the node fields of `state`.
+    fn refresh(&mut self, state: &NodeState) {
+        self.map.apply(&state.position, &mut self.position);
+        self.map.apply(&state.displacement, &mut self.displacement);
+        self.map.apply(&state.velocity, &mut self.velocity);
+    }
+}
+
+/// The rest positions of the blocks: the mesh nodes, or the coefficients
+/// of the identity map.
+fn rest<'a>(mesh: &'a PolyMesh, elements: &'a Model) -> &'a [[f64; 3]] {
+    match elements {
+        Model::Nodal(_) => &mesh.nodes,
+        Model::Dg(d) => d.rest(),
+    }
 }
 
 impl Simulation {
     /// Checks the parameters, validates `mesh`, builds the element store
-    /// and the sparse pattern.
+    /// and the sparse pattern (for the discontinuous Galerkin family, with
+    /// the interior penalty doubled until the rest system is positive
+    /// definite).
     pub fn new(mesh: PolyMesh, params: SimulationParams) -> Result<Self, Error> {
         params.check()?;
         mesh.validate()?;
         let mut timings = PhaseTimings::default();
         let store = timings.time(Phase::Basis, || ElementStore::build(&mesh, &params.material, &params.basis))?;
-        let pattern = timings.time(Phase::Assembly, || SparsePattern::build(mesh.nodes.len(), &store));
-        let masses = store.lumped_masses(mesh.nodes.len(), params.material.density);
-        let corotation = Corotation::new(&store);
+        let density = params.material.density;
+        let (elements, pattern, masses, loads) = if params.basis.family == Family::Dg {
+            let dg = timings.time(Phase::Basis, || DgElements::new(&mesh, store, params.basis.dg, &[]));
+            let pattern = timings.time(Phase::Assembly, || SparsePattern::build(dg.num_blocks(), &dg));
+            let (masses, loads) = (dg.masses(density), dg.loads(density));
+            (Model::Dg(Box::new(dg)), pattern, masses, loads)
+        } else {
+            let pattern = timings.time(Phase::Assembly, || SparsePattern::build(mesh.nodes.len(), &store));
+            let masses = store.lumped_masses(mesh.nodes.len(), density);
+            let corotation = Corotation::new(&store);
+            (Model::Nodal(NodalElements { store, corotation }), pattern, masses.clone(), masses)
+        };
         let system = StepSystem::new(params.solver, &pattern, params.tolerance, params.max_iterations);
-        let (state, surface) = (NodeState::at_rest(&mesh.nodes), mesh.boundary_triangles());
-        Ok(Simulation {
+        let (state, surface) = (NodeState::at_rest(rest(&mesh, &elements)), mesh.boundary_triangles());
+        let mut sim = Simulation {
             mesh,
             params,
-            elements: NodalElements { store, corotation },
+            elements,
             pattern,
             masses,
+            loads,
             boundary: Boundary::default(),
             state,
+            nodes: NodeView::default(),
+            contacts: None,
             surface,
             system,
             statics: None,
             steps: 0,
             cut_retries: 0,
+            faces_integrated: 0,
             timings,
-        })
+        };
+        sim.refresh_dg()?;
+        Ok(sim)
     }
 
-    /// Adds a Dirichlet region (checked, see [`FixedRegion::check`]).
-    pub fn fix(&mut self, region: FixedRegion) -> Result<(), Error> {
-        region.check()?;
-        self.boundary.fixed.push(region);
+    /// For the discontinuous Galerkin family, after the elements or the
+    /// fixed regions changed: face terms (with the penalty doubled until
+    /// stable), pattern, masses, node and collision maps and the system.
+    fn refresh_dg(&mut self) -> Result<(), Error> {
+        let Model::Dg(dg) = &mut self.elements else {
+            return Ok(());
+        };
+        let (mesh, fixed) = (&self.mesh, &self.boundary.fixed);
+        dg.refresh(mesh, fixed);
+        self.pattern = SparsePattern::build(dg.num_blocks(), &**dg);
+        let t = std::time::Instant::now();
+        dg.stabilise(mesh, fixed, &self.pattern)?;
+        self.timings.add(Phase::Solve, t.elapsed().as_secs_f64());
+        let density = self.params.material.density;
+        (self.masses, self.loads) = (dg.masses(density), dg.loads(density));
+        self.nodes.map = dg.node_map(mesh);
+        self.contacts = Some(dg.contact_points(mesh));
+        self.nodes.refresh(&self.state);
+        let p = &self.params;
+        self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        self.statics = None;
         Ok(())
     }
 
+    /// Adds a Dirichlet region (checked, see [`FixedRegion::check`]): the
+    /// nodes inside it are held (nodal families), or the boundary faces
+    /// whose vertices all lie inside it are held weakly (discontinuous
+    /// Galerkin).
+    pub fn fix(&mut self, region: FixedRegion) -> Result<(), Error> {
+        region.check()?;
+        self.boundary.fixed.push(region);
+        self.refresh_dg()
+    }
+
     /// Holds node `node` at displacement `u` (m), overriding fixed regions;
-    /// pinning again moves it.
+    /// pinning again moves it. Nodal families only: the discontinuous
+    /// Galerkin family holds boundary faces, through fixed regions.
     pub fn pin(&mut self, node: usize, u: [f64; 3]) -> Result<(), Error> {
         let n = self.mesh.nodes.len();
+        if self.elements.dg().is_some() {
+            let allowed = "pins hold nodes of the nodal families; with family = dg use a fixed region";
+            return Err(ParamError::new("node", node, allowed).into());
+        }
         if node >= n {
             return Err(ParamError::new("node", node, format!("must name one of the mesh's {n} nodes")).into());
         }
@@ -151,19 +249,35 @@ impl Simulation {
         }
     }
 
-    /// Sets nodal velocities (m/s), e.g. an initial spin.
+    /// Per-block values of per-node `values`: themselves (nodal), or each
+    /// element's affine least-squares fit to its vertices (DG).
+    fn blocks_of(&self, values: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        match &self.elements {
+            Model::Nodal(_) => values.to_vec(),
+            Model::Dg(d) => d.fit_affine(&self.mesh, values),
+        }
+    }
+
+    /// Sets the velocities (m/s) from one per node, e.g. an initial spin
+    /// (for DG, each element takes the affine field that fits its vertices
+    /// best, exact for affine fields).
     pub fn set_velocities(&mut self, v: &[[f64; 3]]) -> Result<(), Error> {
         self.check_per_node("velocity", v)?;
-        self.state.velocity.copy_from_slice(v);
-        self.state.previous_velocity.copy_from_slice(v);
+        let blocks = self.blocks_of(v);
+        self.state.velocity.copy_from_slice(&blocks);
+        self.state.previous_velocity.copy_from_slice(&blocks);
+        self.nodes.refresh(&self.state);
         Ok(())
     }
 
-    /// Sets nodal displacements (m), e.g. a rigidly rotated start.
+    /// Sets the displacements (m) from one per node, e.g. a rigidly rotated
+    /// start (for DG as [`Simulation::set_velocities`]).
     pub fn set_displacements(&mut self, u: &[[f64; 3]]) -> Result<(), Error> {
         self.check_per_node("displacement", u)?;
-        self.state.displacement.copy_from_slice(u);
-        self.state.refresh_positions(&self.mesh.nodes);
+        let blocks = self.blocks_of(u);
+        self.state.displacement.copy_from_slice(&blocks);
+        self.state.refresh_positions(rest(&self.mesh, &self.elements));
+        self.nodes.refresh(&self.state);
         Ok(())
     }
 
@@ -179,38 +293,78 @@ impl Simulation {
 
     /// The element store.
     pub fn store(&self) -> &ElementStore {
-        &self.elements.store
+        self.elements.store()
     }
 
     /// The corotation state (rotations of the last step, per element).
     pub fn corotation(&self) -> &Corotation {
-        &self.elements.corotation
+        self.elements.corotation()
+    }
+
+    /// The discontinuous Galerkin discretisation, when the family is DG
+    /// (its faces, penalty and bases).
+    pub fn dg(&self) -> Option<&DgElements> {
+        self.elements.dg()
+    }
+
+    /// Whether per-node fields are the blocks themselves.
+    fn nodal(&self) -> bool {
+        matches!(self.elements, Model::Nodal(_))
     }
 
     /// Nodal displacements (m).
     pub fn displacements(&self) -> &[[f64; 3]] {
-        &self.state.displacement
+        if self.nodal() {
+            &self.state.displacement
+        } else {
+            &self.nodes.displacement
+        }
     }
 
     /// Nodal displacements as a flat slice `[u0x, u0y, u0z, u1x, ...]` (m).
     pub fn displacements_flat(&self) -> &[f64] {
-        bytemuck::cast_slice(&self.state.displacement)
+        bytemuck::cast_slice(self.displacements())
     }
 
     /// Nodal velocities (m/s).
     pub fn velocities(&self) -> &[[f64; 3]] {
-        &self.state.velocity
+        if self.nodal() {
+            &self.state.velocity
+        } else {
+            &self.nodes.velocity
+        }
     }
 
     /// Current node positions `x0 + u` (m).
     pub fn positions(&self) -> &[[f64; 3]] {
-        &self.state.position
+        if self.nodal() {
+            &self.state.position
+        } else {
+            &self.nodes.position
+        }
     }
 
     /// Current node positions as a flat slice `[x0, y0, z0, x1, ...]` (m),
     /// ready for a renderer's vertex buffer.
     pub fn positions_flat(&self) -> &[f64] {
-        bytemuck::cast_slice(&self.state.position)
+        bytemuck::cast_slice(self.positions())
+    }
+
+    /// The state of the unknown blocks: positions, displacements and
+    /// velocities (the nodes' for the nodal families, the coefficients'
+    /// for DG).
+    pub fn block_positions(&self) -> &[[f64; 3]] {
+        &self.state.position
+    }
+
+    /// The block displacements (see [`Simulation::block_positions`]).
+    pub fn block_displacements(&self) -> &[[f64; 3]] {
+        &self.state.displacement
+    }
+
+    /// The block velocities (see [`Simulation::block_positions`]).
+    pub fn block_velocities(&self) -> &[[f64; 3]] {
+        &self.state.velocity
     }
 
     /// The boundary surface: outward triangles over node ids (index into
@@ -219,9 +373,16 @@ impl Simulation {
         &self.surface
     }
 
-    /// Lumped nodal masses (kg).
+    /// Masses per unknown block (kg): lumped nodal masses, or for DG the
+    /// exact masses `ρ V` of each element's orthonormal functions.
     pub fn masses(&self) -> &[f64] {
         &self.masses
+    }
+
+    /// The gravity weights per block (kg): `ρ ∫ N_a`, the masses for the
+    /// nodal families; summed, the body's mass.
+    pub fn loads(&self) -> &[f64] {
+        &self.loads
     }
 
     /// Steps taken so far.
@@ -233,6 +394,12 @@ impl Simulation {
     /// whole, because the element store found a part it made unhealthy.
     pub fn cut_retries(&self) -> usize {
         self.cut_retries
+    }
+
+    /// How many faces the cuts of a DG body integrated again (the others
+    /// kept their moments).
+    pub fn faces_integrated(&self) -> usize {
+        self.faces_integrated
     }
 
     /// Simulated time (s).

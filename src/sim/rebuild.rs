@@ -10,7 +10,7 @@ use crate::topology::{
 };
 use crate::Error;
 
-use super::{Phase, PhaseTimings, Simulation, StepSystem, CUT_ATTEMPTS};
+use super::{Model, Phase, PhaseTimings, Simulation, StepSystem, CUT_ATTEMPTS};
 
 impl Simulation {
     /// Cuts the body along a whole plane given in the rest (material)
@@ -110,14 +110,20 @@ impl Simulation {
         // coincident nodes by design, which a whole-mesh check would flag)
         let list: Vec<usize> = touched.iter().map(|&e| e as usize).collect();
         mesh.check_elements(&list, &ValidationOptions::default())?;
+        // the negative part of a split element inherits from its positive part
+        let parents: Vec<(u32, u32)> = cut.split.split_elements.iter().map(|&(kept, new)| (new, kept)).collect();
+        let nodal = match &mut self.elements {
+            Model::Nodal(nodal) => nodal,
+            Model::Dg(_) => return self.apply_cut_dg(cut, &parents),
+        };
         let origins = NodeOrigins::of_polygon_cut(report).map_err(|m| Error::Internal(format!("{m} after a cut")))?;
         if origins.len() != mesh.nodes.len() {
             let message = format!("{} node states for {} nodes after a cut", origins.len(), mesh.nodes.len());
             return Err(Error::Internal(message));
         }
-        let store = &mut self.elements.store;
+        let store = &mut nodal.store;
         let t = std::time::Instant::now();
-        let changes = store.update(mesh, &self.params.material, &self.params.basis, touched)?;
+        let changes = store.update(mesh, &self.params.material, &self.params.basis, touched, &parents)?;
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
         // the nodes whose mass changes: those of the touched elements,
         // before and after
@@ -136,14 +142,82 @@ impl Simulation {
         self.pattern.update(n, &*store, touched, &cut.old_nodes);
         self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
         self.masses = store.lumped_masses(n, self.params.material.density);
+        self.loads.clone_from(&self.masses);
         state.refresh_positions(&mesh.nodes);
         conserve_momentum(&changed_nodes, &self.masses, &state.position, &mut state.velocity, before);
         let warp = self.params.corotated;
-        self.elements.corotation.apply_changes(store, &changes, &state.position, warp);
+        nodal.corotation.apply_changes(store, &changes, &state.position, warp);
         let p = &self.params;
         self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
         self.surface = mesh.boundary_triangles();
+        Ok(())
+    }
+
+    /// [`Simulation::apply_cut`] for the discontinuous Galerkin family: the
+    /// touched elements are rebuilt in their parents' frames (only the
+    /// faces the cut changed are integrated again), and each takes its
+    /// parent's polynomials re-expressed in its own basis (the paper's
+    /// heuristic of copying the coefficients, made exact: the fields do not
+    /// change, so neither do momentum and angular momentum).
+    fn apply_cut_dg(&mut self, cut: &CutReport, parents: &[(u32, u32)]) -> Result<(), Error> {
+        let Model::Dg(dg) = &mut self.elements else {
+            return Err(Error::Internal("a nodal body in the DG rebuild".into()));
+        };
+        let (mesh, touched, m) = (&self.mesh, &cut.touched, dg.size());
+        let existing = dg.store.locate.len() as u32;
+        let parent = |e: u32| parents.iter().find(|p| p.0 == e).map_or(e, |p| p.1);
+        // the parents' bases and fields before the cut
+        let mut old = std::collections::HashMap::new();
+        for &e in touched {
+            let p = parent(e);
+            if p < existing && !old.contains_key(&p) {
+                let blocks = p as usize * m..(p as usize + 1) * m;
+                let state = &self.state;
+                let fields = (
+                    state.displacement[blocks.clone()].to_vec(),
+                    state.velocity[blocks.clone()].to_vec(),
+                    state.previous_velocity[blocks].to_vec(),
+                );
+                old.insert(p, (dg.basis(p).coefficients, fields));
+            }
+        }
+        let t = std::time::Instant::now();
+        let changes = dg.store.update(mesh, &self.params.material, &self.params.basis, touched, parents)?;
+        let blocks = dg.num_blocks();
+        for field in [&mut self.state.displacement, &mut self.state.velocity, &mut self.state.previous_velocity] {
+            field.resize(blocks, [0.0; 3]);
+        }
+        for &e in touched {
+            let Some((c_parent, (u, v, w))) = old.get(&parent(e)) else { continue };
+            let transfer = crate::store::dg::transfer(c_parent, &dg.basis(e).coefficients, m);
+            let state = &mut self.state;
+            let at = e as usize * m..(e as usize + 1) * m;
+            for (field, from) in
+                [(&mut state.displacement, u), (&mut state.velocity, v), (&mut state.previous_velocity, w)]
+            {
+                for (j, out) in field[at.clone()].iter_mut().enumerate() {
+                    *out = std::array::from_fn(|k| (0..m).map(|i| transfer[i * m + j] * from[i][k]).sum());
+                }
+            }
+        }
+        dg.refresh(mesh, &self.boundary.fixed);
+        self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
+        self.state.refresh_positions(dg.rest());
+        dg.corotation.apply_changes(&dg.store, &changes, &self.state.position, self.params.corotated);
+        let t = std::time::Instant::now();
+        self.pattern = crate::assembly::SparsePattern::build(blocks, &**dg);
+        self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
+        let density = self.params.material.density;
+        (self.masses, self.loads) = (dg.masses(density), dg.loads(density));
+        self.nodes.map = dg.node_map(mesh);
+        self.contacts = Some(dg.contact_points(mesh));
+        self.nodes.refresh(&self.state);
+        let p = &self.params;
+        self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        self.statics = None;
+        self.surface = mesh.boundary_triangles();
+        self.faces_integrated += changes.faces_integrated;
         Ok(())
     }
 }

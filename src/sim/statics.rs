@@ -4,7 +4,7 @@ use crate::assembly::Constraints;
 use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverKind};
 use crate::Error;
 
-use super::{Discretization, Phase, Simulation};
+use super::{Discretization, Model, Phase, Simulation};
 
 /// The solver of the static problem, kept beside the step's (their
 /// matrices differ; both write the simulation's one values buffer).
@@ -33,12 +33,18 @@ impl Simulation {
             pattern.assemble(values, |b, i, bb, out| elements.rest_stiffness_column(b, i, bb, out))
         });
         let g = self.params.gravity;
-        let mut rhs: Vec<f64> = self.masses.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
-        let mut constraints = Constraints::free(rhs.len());
-        self.boundary.prescribe(&self.mesh.nodes, &self.masses, &self.state.displacement, |i, u| {
-            (0..3).for_each(|d| constraints.fix(3 * i + d, u[d]));
-        });
-        constraints.apply(pattern, values, &mut rhs);
+        let mut rhs: Vec<f64> = self.loads.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
+        match &self.elements {
+            Model::Nodal(_) => {
+                let mut constraints = Constraints::free(rhs.len());
+                self.boundary.prescribe(&self.mesh.nodes, &self.masses, &self.state.displacement, |i, u| {
+                    (0..3).for_each(|d| constraints.fix(3 * i + d, u[d]));
+                });
+                constraints.apply(pattern, values, &mut rhs);
+            }
+            // fixed regions act weakly: their loads join the right-hand side
+            Model::Dg(dg) => dg.add_boundary_loads(bytemuck::cast_slice_mut(&mut rhs)),
+        }
         let mut x = vec![0.0; rhs.len()];
         let p = &self.params;
         let statics =
@@ -57,7 +63,8 @@ impl Simulation {
             Ok(stats)
         })?;
         self.state.displacement = x.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        self.state.refresh_positions(&self.mesh.nodes);
+        self.state.refresh_positions(super::rest(&self.mesh, &self.elements));
+        self.nodes.refresh(&self.state);
         Ok(stats)
     }
 }

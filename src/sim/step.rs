@@ -18,7 +18,7 @@ use crate::assembly::{Constraints, SparsePattern};
 use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverKind};
 use crate::Error;
 
-use super::{Boundary, Discretization, NodeState, Phase, Simulation};
+use super::{rest, Boundary, Discretization, NodeState, Phase, PointMap, Simulation};
 
 /// What one time step did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -115,17 +115,30 @@ impl Simulation {
         // 2.
         timings.time(Phase::Assembly, || assemble(elements, pattern, c_k, system));
         // 3.
-        let (masses, gravity, boundary) = (&self.masses, self.params.gravity, &self.boundary);
+        let (masses, loads, gravity, boundary) = (&self.masses, &self.loads, self.params.gravity, &self.boundary);
+        let points = self.contacts.as_ref();
         let contacts = timings.time(Phase::Contacts, || {
-            inertia_and_loads(pattern, masses, state, gravity, h, c_m, system);
-            contact(pattern, boundary, state, h, system)
+            inertia_and_loads(pattern, masses, loads, state, gravity, h, c_m, system);
+            match points {
+                None => contact(pattern, boundary, state, h, system),
+                Some((map, share)) => contact_points(pattern, boundary, map, share, state, h, system),
+            }
         });
         // 4.
-        timings.time(Phase::Constraints, || constrain(pattern, boundary, &self.mesh.nodes, masses, state, h, system));
+        let nodal = points.is_none();
+        timings.time(Phase::Constraints, || {
+            constrain(pattern, boundary, nodal.then_some(&self.mesh.nodes[..]), masses, state, h, system)
+        });
         // 5.
         let solve = timings.time(Phase::Solve, || solve(elements, pattern, masses, state, c_m, c_k, system))?;
         // 6.
-        timings.time(Phase::Integrate, || self.state.integrate(&self.mesh.nodes, &system.velocity, h));
+        let (state, nodes, rest) = (&mut self.state, &mut self.nodes, rest(&self.mesh, &self.elements));
+        timings.time(Phase::Integrate, || {
+            state.integrate(rest, &system.velocity, h);
+            if !nodal {
+                nodes.refresh(state);
+            }
+        });
         self.steps += 1;
         Ok(StepStats { solve, rotation_iterations, contacts })
     }
@@ -151,20 +164,23 @@ fn assemble(elements: &impl Discretization, pattern: &SparsePattern, c_k: f64, s
 }
 
 /// Phase 3a: the mass `c_m M` on the diagonal and the right-hand side
-/// `M v + h (M g + f)`.
+/// `M v + h (W g + f)`, `W` the gravity weights (the masses for nodal
+/// blocks).
+#[allow(clippy::too_many_arguments)]
 fn inertia_and_loads(
     pattern: &SparsePattern,
     masses: &[f64],
+    loads: &[f64],
     state: &NodeState,
     g: [f64; 3],
     h: f64,
     c_m: f64,
     system: &mut StepSystem,
 ) {
-    for (i, &m) in masses.iter().enumerate() {
+    for (i, (&m, &w)) in masses.iter().zip(loads).enumerate() {
         for d in 0..3 {
             system.values[pattern.diagonal_slot(3 * i + d)] += c_m * m;
-            system.rhs[3 * i + d] = m * state.velocity[i][d] + h * (m * g[d] + system.force[i][d]);
+            system.rhs[3 * i + d] = m * state.velocity[i][d] + h * (w * g[d] + system.force[i][d]);
         }
     }
 }
@@ -192,19 +208,70 @@ fn contact(pattern: &SparsePattern, boundary: &Boundary, state: &NodeState, h: f
     contacts
 }
 
+/// Phase 3b for blocks that are not points: every collision point (a
+/// weighted sum of blocks) behind a collider gets its share `s_p` of the
+/// penalty, `k s_p d n` distributed to its blocks by their weights
+/// (times `h`), with the linearisation `h² k s_p w_i w_j n nᵀ`
+/// (kaufmann2008 §9: `K_ij -= W_i A W_j`, `F_i += b W_i`); returns the
+/// number of such contacts.
+fn contact_points(
+    pattern: &SparsePattern,
+    boundary: &Boundary,
+    map: &PointMap,
+    share: &[f64],
+    state: &NodeState,
+    h: f64,
+    system: &mut StepSystem,
+) -> usize {
+    let mut contacts = 0;
+    for c in &boundary.colliders {
+        for (p, &sp) in share.iter().enumerate() {
+            let (blocks, weights) = map.row(p);
+            let mut x = [0.0; 3];
+            for (&i, &w) in blocks.iter().zip(weights) {
+                (0..3).for_each(|k| x[k] += w * state.position[i as usize][k]);
+            }
+            let depth = c.depth(x);
+            if !(depth > 0.0) {
+                continue;
+            }
+            contacts += 1;
+            let k = c.stiffness * sp;
+            for (&i, &wi) in blocks.iter().zip(weights) {
+                let i = i as usize;
+                (0..3).for_each(|r| system.rhs[3 * i + r] += h * k * depth * c.normal[r] * wi);
+                for (&j, &wj) in blocks.iter().zip(weights) {
+                    let j = j as usize;
+                    let Some(base) = pattern.block_offset(i, j) else { continue };
+                    let stride = pattern.column_stride(j);
+                    for r in 0..3 {
+                        for col in 0..3 {
+                            system.values[base + col * stride + r] += h * h * k * wi * wj * c.normal[r] * c.normal[col];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    contacts
+}
+
 /// Phase 4: every prescribed node moves to its target in this step: its
-/// velocity `(u_target - u) / h` is eliminated from the system.
+/// velocity `(u_target - u) / h` is eliminated from the system. Blocks
+/// that are not nodes (`rest` is `None`) have no prescribed values: their
+/// fixed regions act weakly, through face terms.
 fn constrain(
     pattern: &SparsePattern,
     boundary: &Boundary,
-    rest: &[[f64; 3]],
+    rest: Option<&[[f64; 3]]>,
     masses: &[f64],
     state: &NodeState,
     h: f64,
     system: &mut StepSystem,
 ) {
     let constraints = &mut system.constraints;
-    constraints.reset(3 * rest.len());
+    constraints.reset(3 * masses.len());
+    let Some(rest) = rest else { return };
     boundary.prescribe(rest, masses, &state.displacement, |i, u| {
         (0..3).for_each(|d| constraints.fix(3 * i + d, (u[d] - state.displacement[i][d]) / h));
     });

@@ -13,10 +13,10 @@
 //! for the other elements (a few microseconds), so the check stays on. A
 //! failure is an error naming the element.
 
-use cleave_kernels::spectrum::{spectrum_scratch_len, stiffness_spectrum, tet_spectrum};
+use cleave_kernels::spectrum::{spectrum_scratch_len, stiffness_spectrum, tet_spectrum, RigidModes};
 use rayon::prelude::*;
 
-use super::{BasisError, Batch};
+use super::{BasisError, Batch, ElementKind};
 
 /// Floors every built element must meet.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -86,7 +86,10 @@ pub(super) fn check(batch: &mut Batch, floors: &HealthFloors) -> Result<(), Basi
                     tet_spectrum(&x, &g, batch.volume[i], batch.lame.0, batch.lame.1)
                 } else {
                     batch.element_matrix_into(i, ke);
-                    stiffness_spectrum(ke, x, scratch)
+                    // a polynomial basis moves rigidly by its first (constant)
+                    // coefficient and the identity's coefficients
+                    let modes = if batch.kind == ElementKind::Dg { RigidModes::Modal(x) } else { RigidModes::Nodal(x) };
+                    stiffness_spectrum(ke, modes, scratch)
                 };
                 if !(s.rigid_residual <= floors.rigid_residual) {
                     return Err(BasisError::RigidModes { element, residual: s.rigid_residual });

@@ -13,6 +13,7 @@
 //! element ([`harmonic`]), where hexahedra keep the closed-form trilinear
 //! basis (`trilinear`).
 
+pub mod dg;
 pub mod harmonic;
 mod health;
 mod mean_value;
@@ -134,6 +135,10 @@ pub enum ElementKind {
     Trilinear,
     /// Harmonic shape functions by MFS (martin2008).
     Harmonic,
+    /// Discontinuous Galerkin polynomials (kaufmann2008): `k` is the number
+    /// of basis functions and the "nodes" are the element's own
+    /// coefficient blocks.
+    Dg,
 }
 
 /// The shape function family of the elements other than tetrahedra.
@@ -144,6 +149,9 @@ pub enum Family {
     MeanValue,
     /// Harmonic coordinates; hexahedra trilinear, any planar-faced element.
     Harmonic,
+    /// Discontinuous Galerkin polynomials on every element, tetrahedra
+    /// included (see [`dg`]).
+    Dg,
 }
 
 /// All elements with `k` nodes, as structure of arrays.
@@ -182,6 +190,9 @@ pub struct Batch {
     /// `λ₇ / λ_max` of each element's stiffness (the health check's
     /// measure of its softest deformation), one per element.
     pub stiffness_ratio: Vec<f64>,
+    /// The polynomial basis of each element (discontinuous Galerkin
+    /// batches only; empty otherwise).
+    pub dg: Vec<dg::DgBasis>,
 }
 
 impl Batch {
@@ -221,6 +232,9 @@ impl Batch {
         take_last(&mut self.points, i, n);
         take_last(&mut self.weights, i, n);
         take_last(&mut self.stiffness_ratio, i, n);
+        if !self.dg.is_empty() {
+            self.dg.swap_remove(i);
+        }
     }
 
     /// Appends the entries of `other` (same kind, `k` and quadrature size).
@@ -236,6 +250,7 @@ impl Batch {
         self.points.append(&mut other.points);
         self.weights.append(&mut other.weights);
         self.stiffness_ratio.append(&mut other.stiffness_ratio);
+        self.dg.append(&mut other.dg);
     }
 
     /// A batch of the same kind, `k`, material and quadrature with no entries.
@@ -354,12 +369,15 @@ pub struct BasisOptions {
     pub harmonic: HarmonicOptions,
     /// The health every built element must have.
     pub health: HealthFloors,
+    /// Degree and face terms of the discontinuous Galerkin family.
+    pub dg: dg::DgOptions,
 }
 
 impl BasisOptions {
     /// Checks the harmonic fit and quadrature and the health floors.
     pub fn check(&self) -> Result<(), crate::param::ParamError> {
         self.harmonic.check()?;
+        self.dg.check()?;
         self.health.check()
     }
 }
@@ -374,6 +392,9 @@ pub struct StoreChanges {
     /// `(batch, first index, count)` of the entries appended afterwards
     /// (a batch index past the previous batch count is a new batch).
     pub appended: Vec<(u32, u32, u32)>,
+    /// Faces whose moments a discontinuous Galerkin update integrated (the
+    /// others kept theirs).
+    pub faces_integrated: usize,
 }
 
 /// Every element of a mesh, batched by vertex count.
@@ -410,7 +431,8 @@ impl ElementStore {
     /// Builds the store: gathers every element into its batch and computes
     /// volumes, mass fractions, `K_e` and stress-point gradients.
     pub fn build(mesh: &PolyMesh, material: &Material, options: &BasisOptions) -> Result<Self, BasisError> {
-        Self::build_elements(mesh, material, options, 0..mesh.elements.len() as u32)
+        let all = 0..mesh.elements.len() as u32;
+        Self::build_elements(mesh, material, options, all, &|_| None).map(|(store, _)| store)
     }
 
     /// Rebuilds the data of the `changed` elements (mesh ids; ids past the
@@ -425,9 +447,18 @@ impl ElementStore {
         material: &Material,
         options: &BasisOptions,
         changed: &[u32],
+        parents: &[(u32, u32)],
     ) -> Result<StoreChanges, BasisError> {
-        let fresh = Self::build_elements(mesh, material, options, changed.iter().copied())?;
-        let mut moves = StoreChanges::default();
+        // a discontinuous Galerkin element keeps its frame and the moments
+        // of its unchanged faces; a new one takes its parent's
+        let inherit = |e: u32| -> Option<dg::DgBasis> {
+            let from = parents.iter().find(|p| p.0 == e).map_or(e, |p| p.1);
+            let &(b, i) = self.locate.get(from as usize)?;
+            self.batches.get(b as usize)?.dg.get(i as usize).cloned()
+        };
+        let (fresh, faces_integrated) =
+            Self::build_elements(mesh, material, options, changed.iter().copied(), &inherit)?;
+        let mut moves = StoreChanges { faces_integrated, ..Default::default() };
         for &e in changed {
             if let Some(&(b, i)) = self.locate.get(e as usize) {
                 let batch = &mut self.batches[b as usize];
@@ -477,8 +508,10 @@ impl ElementStore {
         material: &Material,
         options: &BasisOptions,
         elements: impl Iterator<Item = u32>,
-    ) -> Result<Self, BasisError> {
+        inherit: &(dyn Fn(u32) -> Option<dg::DgBasis> + Sync),
+    ) -> Result<(Self, usize), BasisError> {
         let mut by_kind: std::collections::BTreeMap<(ElementKind, usize), Vec<u32>> = Default::default();
+        let mut faces_integrated = 0;
         for e in elements {
             let (el, e) = (&mesh.elements[e as usize], e as usize);
             let k = el.nodes.len();
@@ -486,6 +519,7 @@ impl ElementStore {
                 return Err(BasisError::TooManyVertices { element: e, vertices: k, max: MAX_NODES });
             }
             let kind = match (k, options.family) {
+                (_, Family::Dg) => ElementKind::Dg,
                 (4, _) => ElementKind::LinearTet,
                 (_, Family::MeanValue) => ElementKind::MeanValue,
                 (_, Family::Harmonic)
@@ -495,6 +529,9 @@ impl ElementStore {
                 }
                 (_, Family::Harmonic) => ElementKind::Harmonic,
             };
+            // one batch holds every discontinuous Galerkin element: its
+            // size is the number of basis functions, whatever the vertices
+            let k = if kind == ElementKind::Dg { options.dg.size() } else { k };
             by_kind.entry((kind, k)).or_default().push(e as u32);
         }
         let face_bases = if by_kind.keys().any(|(kind, _)| *kind == ElementKind::Harmonic) {
@@ -519,13 +556,18 @@ impl ElementStore {
                 ElementKind::Harmonic => {
                     harmonic::build_batch(mesh, material, &face_bases, &options.harmonic, k, elements)?
                 }
+                ElementKind::Dg => {
+                    let (batch, integrated) = dg::build_batch(mesh, material, &options.dg, elements, inherit)?;
+                    faces_integrated += integrated;
+                    batch
+                }
             };
             store.batches.push(batch);
         }
         for batch in &mut store.batches {
             health::check(batch, &options.health)?;
         }
-        Ok(store)
+        Ok((store, faces_integrated))
     }
 
     /// Lumped nodal masses (kg): `m_i = Σ_e μ_i^e V_e ρ` (wicke2007 eq. 18).
@@ -646,5 +688,6 @@ pub(crate) fn fill_batch<S>(
         weights,
         points_per_element: nq,
         stiffness_ratio: Vec::new(),
+        dg: Vec::new(),
     })
 }

@@ -47,5 +47,6 @@ pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u3
         weights: Vec::new(),
         points_per_element: 1,
         stiffness_ratio: Vec::new(),
+        dg: Vec::new(),
     })
 }
