@@ -80,7 +80,7 @@ impl Collider {
 }
 
 /// Everything that holds or pushes the body.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Default)]
 pub(crate) struct Boundary {
     /// Dirichlet regions; a later one wins where they overlap.
     pub fixed: Vec<FixedRegion>,
@@ -88,6 +88,8 @@ pub(crate) struct Boundary {
     pub pinned: BTreeMap<u32, [f64; 3]>,
     /// Penalty planes.
     pub colliders: Vec<Collider>,
+    /// A body force density besides gravity.
+    pub body: Option<super::body_force::BodyForce>,
 }
 
 impl Boundary {

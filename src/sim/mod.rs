@@ -18,6 +18,7 @@
 //! # Ok::<(), cleave::Error>(())
 //! ```
 
+mod body_force;
 mod boundary;
 mod corotation;
 mod diagnostics;
@@ -30,6 +31,7 @@ mod statics;
 mod step;
 mod timings;
 
+pub use body_force::BodyForce;
 pub use boundary::{Collider, FixedRegion};
 pub use corotation::Corotation;
 pub use diagnostics::Located;
@@ -79,6 +81,8 @@ pub struct Simulation {
     /// `ρ ∫ N_a` for DG.
     loads: Vec<f64>,
     boundary: Boundary,
+    /// The body force's load per block (N); empty without one.
+    body_loads: Vec<[f64; 3]>,
     /// State per block.
     state: NodeState,
     /// Per-node fields of a discretisation whose blocks are not nodes.
@@ -161,6 +165,7 @@ impl Simulation {
             masses,
             loads,
             boundary: Boundary::default(),
+            body_loads: Vec::new(),
             state,
             nodes: NodeView::default(),
             contacts: None,
@@ -197,6 +202,7 @@ impl Simulation {
         let p = &self.params;
         self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
+        self.refresh_body_loads();
         Ok(())
     }
 

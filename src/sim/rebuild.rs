@@ -151,6 +151,7 @@ impl Simulation {
         self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
         self.surface = mesh.boundary_triangles();
+        self.refresh_body_loads();
         Ok(())
     }
 
@@ -218,6 +219,7 @@ impl Simulation {
         self.statics = None;
         self.surface = mesh.boundary_triangles();
         self.faces_integrated += changes.faces_integrated;
+        self.refresh_body_loads();
         Ok(())
     }
 }

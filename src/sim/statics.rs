@@ -34,6 +34,9 @@ impl Simulation {
         });
         let g = self.params.gravity;
         let mut rhs: Vec<f64> = self.loads.iter().flat_map(|&m| [m * g[0], m * g[1], m * g[2]]).collect();
+        for (r, b) in rhs.chunks_exact_mut(3).zip(&self.body_loads) {
+            (0..3).for_each(|k| r[k] += b[k]);
+        }
         match &self.elements {
             Model::Nodal(_) => {
                 let mut constraints = Constraints::free(rhs.len());

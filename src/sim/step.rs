@@ -111,7 +111,8 @@ impl Simulation {
         let (pattern, system, timings) = (&self.pattern, &mut self.system, &mut self.timings);
         let (elements, state, warp) = (&mut self.elements, &self.state, self.params.corotated);
         // 1.
-        let rotation_iterations = timings.time(Phase::Forces, || forces(elements, pattern, state, warp, system));
+        let body = &self.body_loads;
+        let rotation_iterations = timings.time(Phase::Forces, || forces(elements, pattern, state, warp, body, system));
         // 2.
         timings.time(Phase::Assembly, || assemble(elements, pattern, c_k, system));
         // 3.
@@ -145,16 +146,21 @@ impl Simulation {
 }
 
 /// Phase 1: rotations and elastic forces at the current positions,
-/// gathered per node; returns the most rotation iterations.
+/// gathered per block, plus the body force's loads (if any); returns the
+/// most rotation iterations.
 fn forces(
     elements: &mut impl Discretization,
     pattern: &SparsePattern,
     state: &NodeState,
     warp: bool,
+    body: &[[f64; 3]],
     system: &mut StepSystem,
 ) -> usize {
     let iterations = elements.update(&state.position, warp);
     pattern.gather(&mut system.force, |b, i, a| elements.force(b, i, a));
+    for (f, b) in system.force.iter_mut().zip(body) {
+        (0..3).for_each(|k| f[k] += b[k]);
+    }
     iterations
 }
 
