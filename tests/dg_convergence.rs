@@ -140,7 +140,8 @@ fn finest_rate(e: &[(f64, f64)]) -> f64 {
 /// later still: 1.2 to 1.65 from 4³ to 16³.
 #[test]
 fn interior_penalty_converges_at_order_p_plus_one_in_l2() {
-    let cases: [(&str, fn(usize) -> PolyMesh, usize, &[usize]); 4] = [
+    type Case = (&'static str, fn(usize) -> PolyMesh, usize, &'static [usize]);
+    let cases: [Case; 4] = [
         ("hexahedra", hexes, 2, &[2, 4, 8]),
         ("cut hexahedra", |n| cut(hexes(n)), 2, &[2, 4, 8]),
         ("tetrahedra", tets, 1, &[6, 9, 12]),

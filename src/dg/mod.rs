@@ -280,6 +280,36 @@ impl DgElements {
         out
     }
 
+    /// The mesh with every element given its own copies of its vertices
+    /// (for writing the discontinuous field), and for each copy its element
+    /// and original node.
+    pub fn exploded(&self, mesh: &PolyMesh) -> Result<(PolyMesh, Vec<(u32, u32)>), crate::mesh::MeshError> {
+        let mut nodes = Vec::new();
+        let mut copies = Vec::new();
+        let mut cells = Vec::with_capacity(mesh.elements.len());
+        for (e, el) in mesh.elements.iter().enumerate() {
+            let base = nodes.len() as u32;
+            for &v in &el.nodes {
+                nodes.push(mesh.nodes[v as usize]);
+                copies.push((e as u32, v));
+            }
+            let local = |v: u32| base + el.nodes.binary_search(&v).map_or(0, |i| i as u32);
+            let loops = el
+                .faces
+                .iter()
+                .map(|r| {
+                    let mut l: Vec<u32> = mesh.faces[r.face as usize].vertices.iter().map(|&v| local(v)).collect();
+                    if !r.outward {
+                        l.reverse();
+                    }
+                    l
+                })
+                .collect();
+            cells.push(crate::mesh::Cell::Polyhedron(loops));
+        }
+        Ok((PolyMesh::from_cells(nodes, &cells)?, copies))
+    }
+
     /// Doubles the interior penalty (from the options' value) until the
     /// rest-state system `K + ε diag` is positive definite (kaufmann2008
     /// §10: "start with a low value and double it"), rebuilding the face

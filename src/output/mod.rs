@@ -5,6 +5,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::dg::DgElements;
 use crate::io::{write_boundary_obj, write_vtu, IoError, VtuFields};
 use crate::sim::{Located, PhaseTimings, Simulation};
 
@@ -30,17 +31,56 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                 let ids: Vec<i64> = (0..mesh.elements.len() as i64).collect();
                 let counts: Vec<i64> = mesh.elements.iter().map(|e| e.nodes.len() as i64).collect();
                 let vm = sim.von_mises();
+                let mut point_vectors = vec![("displacement", sim.displacements()), ("velocity", sim.velocities())];
+                if sim.dg().is_some() {
+                    // the nodal field of DG is the stitched one (kaufmann2008 eq. 17)
+                    point_vectors.push(("displacement_stitched", sim.displacements()));
+                }
                 let fields = VtuFields {
-                    point_vectors: vec![("displacement", sim.displacements()), ("velocity", sim.velocities())],
+                    point_vectors,
                     cell_scalars: vec![("von_mises", &vm)],
                     cell_ints: vec![("element_id", &ids), ("vertex_count", &counts)],
                 };
                 write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, positions, &fields)?;
+                if let Some(dg) = sim.dg() {
+                    write_dg_elements(&dir.join(format!("frame_{index:04}_dg.vtu")), sim, dg, &vm)?;
+                }
             }
             Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), positions)?,
         }
     }
     Ok(())
+}
+
+/// The discontinuous field itself: every element with its own copy of its
+/// vertices, placed and moved by its own polynomial (the jumps between
+/// elements show), with `displacement` and `velocity` per copy.
+fn write_dg_elements(path: &Path, sim: &Simulation, dg: &DgElements, von_mises: &[f64]) -> Result<(), IoError> {
+    let mesh = sim.mesh();
+    let m = dg.size();
+    let (exploded, copies) = dg.exploded(mesh).map_err(|e| IoError::mesh(path, e))?;
+    let (x, v) = (sim.block_positions(), sim.block_velocities());
+    let mut n = vec![0.0; m];
+    let mut position = Vec::with_capacity(copies.len());
+    let (mut displacement, mut velocity) = (Vec::with_capacity(copies.len()), Vec::with_capacity(copies.len()));
+    for &(e, node) in &copies {
+        let rest = mesh.nodes[node as usize];
+        dg.basis(e).values(rest, &mut n);
+        let field = |f: &[[f64; 3]]| -> [f64; 3] {
+            std::array::from_fn(|k| (0..m).map(|a| f[e as usize * m + a][k] * n[a]).sum())
+        };
+        let p = field(x);
+        position.push(p);
+        displacement.push([p[0] - rest[0], p[1] - rest[1], p[2] - rest[2]]);
+        velocity.push(field(v));
+    }
+    let ids: Vec<i64> = (0..mesh.elements.len() as i64).collect();
+    let fields = VtuFields {
+        point_vectors: vec![("displacement", &displacement), ("velocity", &velocity)],
+        cell_scalars: vec![("von_mises", von_mises)],
+        cell_ints: vec![("element_id", &ids)],
+    };
+    write_vtu(path, &exploded, &position, &fields)
 }
 
 /// Mean and maximum of a per-step quantity.
@@ -143,6 +183,20 @@ pub struct Summary {
     /// Cuts run again with one more element kept whole because the element
     /// store found a part unhealthy.
     pub cut_retries: usize,
+    /// Discontinuous Galerkin only: the penalty `η` in use (doubled from
+    /// the scene's until the system was positive definite, for `ip`), and
+    /// the faces the cuts integrated again.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dg: Option<DgSummary>,
+}
+
+/// The discontinuous Galerkin figures of a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DgSummary {
+    /// The penalty `η` in use.
+    pub penalty: f64,
+    /// Faces the cuts integrated again (the others kept their moments).
+    pub faces_integrated: usize,
 }
 
 impl MeshCounts {

@@ -8,7 +8,7 @@ use super::{BoxElement, Generator, LoadedScene, Mode, SceneError};
 use crate::io::read_mesh;
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_convex};
-use crate::output::{write_frame, write_summary, MeanMax, MeshCounts, SolverSummary, Summary};
+use crate::output::{write_frame, write_summary, DgSummary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{Located, Simulation};
 use crate::topology::merge_slivers;
 use crate::Error;
@@ -233,6 +233,7 @@ fn run(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Failure> {
         free_fall_speed,
         min_mass_ratio,
         cut_retries: sim.cut_retries(),
+        dg: sim.dg().map(|d| DgSummary { penalty: d.penalty, faces_integrated: sim.faces_integrated() }),
     };
     write_summary(&dir.join("summary.json"), &summary)?;
     Ok(summary)

@@ -216,8 +216,14 @@ fn faces_of(mesh: &PolyMesh, e: usize, cache: Option<&DgBasis>, todo: &mut Vec<u
         if !r.outward {
             vertices.reverse();
         }
-        match cache.and_then(|b| b.faces.iter().find(|f| f.vertices == vertices)) {
-            Some(known) => out.push(FaceMoments { face: r.face, ..known.clone() }),
+        // the same polygon (a cut renames nodes it duplicates: compare where
+        // the vertices are, which a cut never changes)
+        let same = |f: &FaceMoments| {
+            f.vertices.len() == vertices.len()
+                && f.vertices.iter().zip(&vertices).all(|(&a, &b)| mesh.nodes[a as usize] == mesh.nodes[b as usize])
+        };
+        match cache.and_then(|b| b.faces.iter().find(|f| same(f))) {
+            Some(known) => out.push(FaceMoments { face: r.face, vertices, ..known.clone() }),
             None => {
                 todo.push(out.len());
                 out.push(FaceMoments { face: r.face, vertices, plane: [0.0; 4], moments: Vec::new() });
