@@ -25,7 +25,7 @@ use crate::mesh::{MeshError, PolyMesh};
 
 pub use gmsh::{read_gmsh, write_gmsh};
 pub use medit::{read_medit, write_medit};
-pub use obj::{read_obj_surface, write_boundary_obj, Surface};
+pub use obj::{read_obj_surface, write_boundary_obj, write_surface_obj, Surface};
 pub use tetgen::{read_tetgen, write_tetgen};
 pub use vtu::{read_vtu, write_vtu, VtuFields};
 

@@ -50,11 +50,16 @@ pub fn read_obj_surface(path: &Path) -> Result<Surface, IoError> {
 /// Writes the boundary surface of `mesh` (triangulated, outward) at the node
 /// positions `positions` (rest positions plus displacement, m).
 pub fn write_boundary_obj(path: &Path, mesh: &PolyMesh, positions: &[[f64; 3]]) -> Result<(), IoError> {
+    write_surface_obj(path, positions, &mesh.boundary_triangles())
+}
+
+/// Writes the triangle surface `triangles` over `vertices` (m).
+pub fn write_surface_obj(path: &Path, vertices: &[[f64; 3]], triangles: &[[u32; 3]]) -> Result<(), IoError> {
     let mut s = String::new();
-    for p in positions {
+    for p in vertices {
         let _ = writeln!(s, "v {} {} {}", p[0], p[1], p[2]);
     }
-    for t in mesh.boundary_triangles() {
+    for t in triangles {
         let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
     }
     write_text(path, &s)

@@ -6,7 +6,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::dg::DgElements;
-use crate::io::{write_boundary_obj, write_vtu, IoError, VtuFields};
+use crate::io::{write_boundary_obj, write_surface_obj, write_vtu, IoError, VtuFields};
 use crate::sim::{Located, PhaseTimings, Simulation};
 
 /// Frame formats.
@@ -46,7 +46,12 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                     write_dg_elements(&dir.join(format!("frame_{index:04}_dg.vtu")), sim, dg, &vm)?;
                 }
             }
-            Format::Obj => write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), positions)?,
+            Format::Obj => {
+                write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), positions)?;
+                if let Some((vertices, triangles)) = sim.embedded_surface() {
+                    write_surface_obj(&dir.join(format!("frame_{index:04}_embedded.obj")), &vertices, triangles)?;
+                }
+            }
         }
     }
     Ok(())

@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::{BoxElement, Generator, LoadedScene, Mode, SceneError};
-use crate::io::read_mesh;
+use crate::io::{read_mesh, read_obj_surface};
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_convex};
 use crate::output::{write_frame, write_summary, DgSummary, MeanMax, MeshCounts, SolverSummary, Summary};
-use crate::sim::{Located, Simulation};
+use crate::sim::{EmbeddedSurface, Located, Simulation};
 use crate::topology::merge_slivers;
 use crate::Error;
 
@@ -93,6 +93,11 @@ impl LoadedScene {
         }
         for c in &s.collider {
             sim.add_collider(c.collider().map_err(|e| self.engine(e))?);
+        }
+        if let Some(file) = &s.mesh.embed {
+            let surface = read_obj_surface(&self.resolve(file)).map_err(|e| self.engine(e))?;
+            let surface = EmbeddedSurface { vertices: surface.vertices, triangles: surface.triangles };
+            sim.embed(surface).map_err(engine)?;
         }
         let v0 = s.simulation.velocity;
         if v0 != [0.0; 3] {

@@ -76,6 +76,11 @@ pub struct MeshSpec {
     /// Merge tetrahedra of quality `6√2 V / d³` below this away before the
     /// run (wicke2007 §4; see `topology::merge_slivers`), in (0, 1).
     pub merge_slivers: Option<f64>,
+    /// A surface (OBJ, relative to the scene) embedded in the body: it
+    /// moves with it by moving least squares, collides instead of the
+    /// nodes, and is written per frame as `frame_NNNN_embedded.obj`
+    /// (kaufmann2008 §8-9).
+    pub embed: Option<String>,
 }
 
 /// Mesh generators.

@@ -23,6 +23,7 @@ mod boundary;
 mod corotation;
 mod diagnostics;
 mod discretization;
+pub mod embedding;
 mod params;
 mod points;
 mod rebuild;
@@ -36,6 +37,7 @@ pub use boundary::{Collider, FixedRegion};
 pub use corotation::Corotation;
 pub use diagnostics::Located;
 pub use discretization::{Discretization, Model, NodalElements};
+pub use embedding::EmbeddedSurface;
 pub use params::{SimulationParams, CUT_ATTEMPTS};
 pub use points::PointMap;
 pub use step::StepStats;
@@ -87,9 +89,12 @@ pub struct Simulation {
     state: NodeState,
     /// Per-node fields of a discretisation whose blocks are not nodes.
     nodes: NodeView,
-    /// Collision points of a discretisation whose blocks are not nodes,
-    /// and each point's share of a collider's stiffness.
+    /// Collision points of a discretisation whose blocks are not nodes, or
+    /// of an embedded surface, and each point's share of a collider's
+    /// stiffness.
     contacts: Option<(PointMap, Vec<f64>)>,
+    /// An embedded surface and its map from the blocks.
+    embedded: Option<(EmbeddedSurface, PointMap)>,
     /// Outward triangles of the boundary surface (node ids), per topology.
     surface: Vec<[u32; 3]>,
     /// The step's system, solver and buffers.
@@ -169,6 +174,7 @@ impl Simulation {
             state,
             nodes: NodeView::default(),
             contacts: None,
+            embedded: None,
             surface,
             system,
             statics: None,
@@ -203,7 +209,49 @@ impl Simulation {
         self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
         self.refresh_body_loads();
+        self.refresh_embedding()
+    }
+
+    /// Embeds a surface (rest coordinates) in the body: it moves with the
+    /// body by moving least squares over the nodes (kaufmann2008 §8, see
+    /// [`EmbeddedSurface`]), and the colliders act on its vertices instead
+    /// of the nodes (§9), each with the collider's full stiffness. A vertex
+    /// out of reach of the nodes is an error naming it.
+    pub fn embed(&mut self, surface: EmbeddedSurface) -> Result<(), Error> {
+        if let Some((i, v)) = surface.vertices.iter().enumerate().find(|(_, v)| !v.iter().all(|x| x.is_finite())) {
+            return Err(ParamError::new("embedded vertex", format!("{i} at {v:?}"), "must be finite (m)").into());
+        }
+        let n = surface.vertices.len();
+        if let Some(t) = surface.triangles.iter().find(|t| t.iter().any(|&v| v as usize >= n)) {
+            return Err(ParamError::new("embedded triangle", t, format!("must index the {n} vertices")).into());
+        }
+        self.embedded = Some((surface, PointMap::default()));
+        self.refresh_embedding()
+    }
+
+    /// Recomputes the embedded surface's map from the blocks (after a
+    /// topology change) and makes its vertices the collision points.
+    fn refresh_embedding(&mut self) -> Result<(), Error> {
+        let Some((surface, _)) = self.embedded.take() else {
+            return Ok(());
+        };
+        let to_nodes = embedding::mls_map(&self.mesh, &surface.vertices)?;
+        let map = match &self.elements {
+            Model::Nodal(_) => to_nodes,
+            Model::Dg(_) => embedding::compose(&to_nodes, &self.nodes.map),
+        };
+        self.contacts = Some((map.clone(), vec![1.0; surface.vertices.len()]));
+        self.embedded = Some((surface, map));
         Ok(())
+    }
+
+    /// The embedded surface at the current positions: its vertices (m) and
+    /// triangles, if one is embedded.
+    pub fn embedded_surface(&self) -> Option<(Vec<[f64; 3]>, &[[u32; 3]])> {
+        let (surface, map) = self.embedded.as_ref()?;
+        let mut x = Vec::new();
+        map.apply(&self.state.position, &mut x);
+        Some((x, &surface.triangles))
     }
 
     /// Adds a Dirichlet region (checked, see [`FixedRegion::check`]): the

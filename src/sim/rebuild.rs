@@ -152,7 +152,7 @@ impl Simulation {
         self.statics = None;
         self.surface = mesh.boundary_triangles();
         self.refresh_body_loads();
-        Ok(())
+        self.refresh_embedding()
     }
 
     /// [`Simulation::apply_cut`] for the discontinuous Galerkin family: the
@@ -220,7 +220,7 @@ impl Simulation {
         self.surface = mesh.boundary_triangles();
         self.faces_integrated += changes.faces_integrated;
         self.refresh_body_loads();
-        Ok(())
+        self.refresh_embedding()
     }
 }
 

@@ -248,11 +248,16 @@ fn contact_points(
                 (0..3).for_each(|r| system.rhs[3 * i + r] += h * k * depth * c.normal[r] * wi);
                 for (&j, &wj) in blocks.iter().zip(weights) {
                     let j = j as usize;
-                    let Some(base) = pattern.block_offset(i, j) else { continue };
-                    let stride = pattern.column_stride(j);
+                    // a pair the pattern does not couple (blocks of elements
+                    // apart, under an embedded vertex) is lumped onto the
+                    // diagonal: the linearisation is then stiffer, never softer
+                    let (base, stride, w) = match pattern.block_offset(i, j) {
+                        Some(base) => (base, pattern.column_stride(j), wi * wj),
+                        None => (pattern.block_slot(i, 0, 0), pattern.column_stride(i), (wi * wj).abs()),
+                    };
                     for r in 0..3 {
                         for col in 0..3 {
-                            system.values[base + col * stride + r] += h * h * k * wi * wj * c.normal[r] * c.normal[col];
+                            system.values[base + col * stride + r] += h * h * k * w * c.normal[r] * c.normal[col];
                         }
                     }
                 }
