@@ -181,8 +181,9 @@ fn collisions_on_embedded_vertices_hold_the_surface_above_the_plane() {
             let (mut lowest_surface, mut lowest_node) = (f64::INFINITY, f64::INFINITY);
             for _ in 0..300 {
                 sim.step().unwrap();
-                if let Some((x, _)) = sim.embedded_surface() {
-                    lowest_surface = lowest_surface.min(x.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min));
+                if let Some(surface) = sim.embedded_surface() {
+                    let z = surface.vertices.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min);
+                    lowest_surface = lowest_surface.min(z);
                 }
                 lowest_node = lowest_node.min(sim.positions().iter().map(|p| p[2]).fold(f64::INFINITY, f64::min));
             }

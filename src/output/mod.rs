@@ -48,8 +48,9 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
             }
             Format::Obj => {
                 write_boundary_obj(&dir.join(format!("frame_{index:04}.obj")), sim.mesh(), positions)?;
-                if let Some((vertices, triangles)) = sim.embedded_surface() {
-                    write_surface_obj(&dir.join(format!("frame_{index:04}_embedded.obj")), &vertices, triangles)?;
+                if let Some(surface) = sim.embedded_surface() {
+                    let path = dir.join(format!("frame_{index:04}_embedded.obj"));
+                    write_surface_obj(&path, &surface.vertices, &surface.triangles)?;
                 }
             }
         }

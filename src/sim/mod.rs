@@ -245,13 +245,13 @@ impl Simulation {
         Ok(())
     }
 
-    /// The embedded surface at the current positions: its vertices (m) and
-    /// triangles, if one is embedded.
-    pub fn embedded_surface(&self) -> Option<(Vec<[f64; 3]>, &[[u32; 3]])> {
+    /// The embedded surface at the current positions, if one is embedded:
+    /// its vertices (m) over the triangles it was given.
+    pub fn embedded_surface(&self) -> Option<EmbeddedSurface> {
         let (surface, map) = self.embedded.as_ref()?;
-        let mut x = Vec::new();
-        map.apply(&self.state.position, &mut x);
-        Some((x, &surface.triangles))
+        let mut vertices = Vec::new();
+        map.apply(&self.state.position, &mut vertices);
+        Some(EmbeddedSurface { vertices, triangles: surface.triangles.clone() })
     }
 
     /// Adds a Dirichlet region (checked, see [`FixedRegion::check`]): the
