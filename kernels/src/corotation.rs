@@ -468,9 +468,20 @@ mod tests {
         crate::rotation::rotation_matrix(q.map(|c| c / l))
     }
 
+    /// Inputs of every corotation kernel for one batch.
+    struct Batch {
+        k: usize,
+        nodes: Vec<u32>,
+        x: Vec<[f64; 3]>,
+        grads: Vec<[f64; 3]>,
+        rest: Vec<[f64; 3]>,
+        stiffness: Vec<f64>,
+        rotations: Vec<[f64; 9]>,
+    }
+
     /// A batch of 11 elements with 5 nodes each (more than any lane width,
     /// not a multiple of it) over 30 positions.
-    fn batch() -> (usize, Vec<u32>, Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>, Vec<[f64; 9]>) {
+    fn batch() -> Batch {
         let (k, n) = (5, 11);
         let nodes: Vec<u32> = (0..n * k).map(|i| ((i * 7 + 3) % 30) as u32).collect();
         let x: Vec<[f64; 3]> =
@@ -480,12 +491,12 @@ mod tests {
         let rest: Vec<[f64; 3]> = (0..n * k).map(|i| [0.1 * i as f64, (i as f64 * 0.5).sin(), 0.3]).collect();
         let stiffness: Vec<f64> = (0..n * 9 * k * k).map(|i| ((i * 31 % 17) as f64 - 8.0) * 1e3).collect();
         let rotations: Vec<[f64; 9]> = (0..n).map(|e| rotation(0.4 * e as f64)).collect();
-        (k, nodes, x, grads, rest, stiffness, rotations)
+        Batch { k, nodes, x, grads, rest, stiffness, rotations }
     }
 
     #[test]
     fn every_kernel_matches_its_scalar_reference_bitwise_on_every_level() {
-        let (k, nodes, x, grads, rest, stiffness, rotations) = batch();
+        let Batch { k, nodes, x, grads, rest, stiffness, rotations } = batch();
         let n = rotations.len();
         let mut want_f = vec![[0.0; 9]; n];
         deformation_gradients_scalar(k, &nodes, &x, &grads, &mut want_f);
