@@ -222,3 +222,33 @@ fn cuts_carry_the_fields_over_exactly_and_runs_do_not_depend_on_threads() {
         assert!(one == two, "degree {degree}: 1 and 2 threads differ");
     }
 }
+
+/// Two polygon cuts free one block of a 2x2x1 grid along two of its faces,
+/// so that it touches the rest along an edge only. A nodal body hangs on
+/// that edge; a DG body glues through faces only, so the edge's nodes are
+/// opened and the freed block shares no node with the rest (its stitched
+/// field is its own).
+#[test]
+fn a_block_left_touching_along_an_edge_gets_its_own_nodes() {
+    let blades = [
+        [[1.0, -0.5, -0.5], [1.0, 1.0, -0.5], [1.0, 1.0, 1.5], [1.0, -0.5, 1.5]],
+        [[-0.5, 1.0, -0.5], [1.0, 1.0, -0.5], [1.0, 1.0, 1.5], [-0.5, 1.0, 1.5]],
+    ];
+    for dg in [false, true] {
+        let mesh = box_hex([0.0; 3], [2.0, 2.0, 1.0], [2, 2, 1]).unwrap();
+        let p = if dg { params(1, Flux::Ip) } else { SimulationParams::default() };
+        let mut sim = Simulation::new(mesh, p).unwrap();
+        for blade in &blades {
+            sim.cut_polygon(blade).unwrap();
+        }
+        let mesh = sim.mesh();
+        let pinched = cleave::topology::pinched_nodes(mesh, 0..mesh.nodes.len() as u32);
+        let corner = &mesh.elements[0].nodes;
+        let shared = mesh.elements[1..].iter().flat_map(|e| &e.nodes).filter(|v| corner.contains(v)).count();
+        if dg {
+            assert!(pinched.is_empty() && shared == 0, "DG: pinched {pinched:?}, {shared} shared");
+        } else {
+            assert!(pinched.len() == 2 && shared > 0, "nodal: pinched {pinched:?}, {shared} shared");
+        }
+    }
+}

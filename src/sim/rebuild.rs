@@ -5,8 +5,8 @@
 
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
-    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, polygon_plane, CutReport, NodeOrigins,
-    PolygonCutReport, Rollback,
+    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, open_pinched_nodes, pinched_nodes,
+    polygon_plane, CutReport, NodeOrigins, PolygonCutReport, Rollback,
 };
 use crate::Error;
 
@@ -202,6 +202,17 @@ impl Simulation {
                 }
             }
         }
+        // DG glues elements through faces only: nodes the cut left between
+        // pieces that touch at a vertex or along an edge are opened, so
+        // that the stitched field never averages two pieces (this renames
+        // nodes only; the bases, found by vertex positions, stay valid)
+        let mut candidates: Vec<u32> =
+            touched.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()).collect();
+        candidates.extend(cut.duplicated.iter().map(|p| p.0));
+        let pinched = pinched_nodes(mesh, candidates);
+        let undo = (!pinched.is_empty()).then(|| Rollback::around_nodes(mesh, &pinched));
+        open_pinched_nodes(&mut self.mesh, &pinched);
+        let mesh = &self.mesh;
         dg.refresh(mesh, &self.boundary.fixed);
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
         self.state.refresh_positions(dg.rest());
@@ -220,7 +231,12 @@ impl Simulation {
         self.surface = mesh.boundary_triangles();
         self.faces_integrated += changes.faces_integrated;
         self.refresh_body_loads();
-        self.refresh_embedding()
+        // (the caller's rollback undoes the cut; the opened nodes first)
+        self.refresh_embedding().inspect_err(|_| {
+            if let Some(undo) = undo {
+                undo.restore(&mut self.mesh);
+            }
+        })
     }
 }
 

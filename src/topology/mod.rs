@@ -1,8 +1,10 @@
 //! Topology changes of a [`crate::mesh::PolyMesh`]: plane splits that
 //! leave no slivers, cuts built on them (whole planes and progressive
-//! polygons), and the rollback of a cut that fails.
+//! polygons), the opening of pinched nodes, and the rollback of a cut that
+//! fails.
 
 mod cut;
+mod pinch;
 mod polygon;
 mod rollback;
 mod sliver;
@@ -10,6 +12,7 @@ mod split;
 mod transfer;
 
 pub use cut::{cut_by_plane, cut_by_plane_keeping, CutReport};
+pub use pinch::{open_pinched_nodes, pinched_nodes};
 pub use polygon::{cut_by_polygon, cut_by_polygon_keeping, polygon_plane, PolygonCutReport};
 pub use rollback::Rollback;
 pub use sliver::{merge_slivers, SliverReport};
