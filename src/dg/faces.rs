@@ -39,7 +39,7 @@ use crate::store::dg::{DgBasis, Flux, MAX_BASIS};
 
 /// The integrals of one interior face, per pair of local functions
 /// `α = side · m + a` (side 0 is `K⁻`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct InteriorFace {
     /// The mesh face.
     pub face: u32,
@@ -56,7 +56,7 @@ pub struct InteriorFace {
 }
 
 /// The integrals of one boundary face in a fixed region.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct BoundaryFace {
     /// The mesh face.
     pub face: u32,
@@ -218,10 +218,68 @@ pub fn boundary(
     Some(BoundaryFace { face, element: element.0, normal: n, weight, mass, grad, load })
 }
 
+/// Face integrals computed before, to be taken over (moved, not copied)
+/// where nothing they depend on changed.
+pub struct Previous {
+    /// The interior faces and, per mesh face, the index of its entry.
+    pub interior: (Vec<InteriorFace>, Vec<u32>),
+    /// The boundary faces and, per mesh face, the index of its entry.
+    pub boundary: (Vec<BoundaryFace>, Vec<u32>),
+    /// Per element, whether it was rebuilt (or is new) since.
+    pub rebuilt: Vec<bool>,
+}
+
+impl Previous {
+    fn unchanged(&self, e: u32) -> bool {
+        self.rebuilt.get(e as usize) == Some(&false)
+    }
+
+    /// The index of the earlier interior entry of face `f` between `minus`
+    /// and `plus`, if neither element was rebuilt.
+    fn interior(&self, f: u32, minus: u32, plus: u32) -> Option<u32> {
+        let (faces, index) = &self.interior;
+        let i = *index.get(f as usize)?;
+        let old = faces.get(i as usize)?;
+        (self.unchanged(minus) && self.unchanged(plus) && old.elements == [minus, plus]).then_some(i)
+    }
+
+    /// Whether face `f` of element `e` had a boundary entry (`Some(index)`)
+    /// or none (`Some(None)`), if `e` was not rebuilt (the fixed regions
+    /// are the same); `None` when it must be computed.
+    fn boundary(&self, f: u32, e: u32) -> Option<Option<u32>> {
+        if !self.unchanged(e) {
+            return None;
+        }
+        let (faces, index) = &self.boundary;
+        let i = *index.get(f as usize)?;
+        Some(faces.get(i as usize).filter(|old| old.element == e).map(|_| i))
+    }
+}
+
+/// A face's integrals: kept from before (by index) or new.
+enum Entry<T> {
+    Kept(u32),
+    New(T),
+}
+
+/// The entries in face order, the kept ones moved out of `old`.
+fn resolve<T: Default>(entries: Vec<Entry<T>>, old: &mut [T]) -> Vec<T> {
+    entries
+        .into_iter()
+        .map(|entry| match entry {
+            Entry::Kept(i) => std::mem::take(&mut old[i as usize]),
+            Entry::New(face) => face,
+        })
+        .collect()
+}
+
 /// The faces of the mesh between elements, and the boundary faces whose
 /// vertices all lie in a fixed region (the last region holding them),
 /// with their integrals, for penalty `η`, Lamé parameters `lame` and
-/// `flux`. `basis(e)` and `volume(e)` describe element `e`.
+/// `flux`. `basis(e)` and `volume(e)` describe element `e`. With
+/// `previous` (after a topology change, at the same penalty and fixed
+/// regions), a face whose elements were not rebuilt keeps its integrals:
+/// only the faces around changed elements are integrated again.
 #[allow(clippy::too_many_arguments)]
 pub fn build<'s>(
     mesh: &PolyMesh,
@@ -231,6 +289,7 @@ pub fn build<'s>(
     flux: Flux,
     basis: &(dyn Fn(u32) -> &'s DgBasis + Sync),
     volume: &(dyn Fn(u32) -> f64 + Sync),
+    mut previous: Option<Previous>,
 ) -> (Vec<InteriorFace>, Vec<BoundaryFace>) {
     let mut users: Vec<Vec<u32>> = vec![Vec::new(); mesh.faces.len()];
     for (e, el) in mesh.elements.iter().enumerate() {
@@ -240,28 +299,37 @@ pub fn build<'s>(
     }
     let modulus = lame.0 + 2.0 * lame.1;
     let area = |b: &DgBasis, f: u32| moments_of(b, f).map_or(0.0, |(q, _)| q[0] * b.frame[3] * b.frame[3]);
-    let interior: Vec<InteriorFace> = (0..mesh.faces.len() as u32)
+    let before = previous.as_ref();
+    let interior: Vec<Entry<InteriorFace>> = (0..mesh.faces.len() as u32)
         .into_par_iter()
         .filter_map(|f| match users[f as usize].as_slice() {
             &[a, b] => {
                 let (minus, plus) = (a.min(b), a.max(b));
+                if let Some(i) = before.and_then(|p| p.interior(f, minus, plus)) {
+                    return Some(Entry::Kept(i));
+                }
                 let bm = basis(minus);
                 let weight = penalty * modulus * area(bm, f) * (1.0 / volume(minus) + 1.0 / volume(plus));
-                interior(f, (minus, bm), (plus, basis(plus)), weight)
+                interior(f, (minus, bm), (plus, basis(plus)), weight).map(Entry::New)
             }
             _ => None,
         })
         .collect();
-    let boundary_faces: Vec<BoundaryFace> = (0..mesh.faces.len() as u32)
+    let boundary_faces: Vec<Entry<BoundaryFace>> = (0..mesh.faces.len() as u32)
         .into_par_iter()
         .filter_map(|f| {
             let &[e] = users[f as usize].as_slice() else { return None };
+            if let Some(kept) = before.and_then(|p| p.boundary(f, e)) {
+                return kept.map(Entry::Kept);
+            }
             let vertices = &mesh.faces[f as usize].vertices;
             let region = fixed.iter().rev().find(|r| vertices.iter().all(|&v| r.contains(mesh.nodes[v as usize])))?;
             let b = basis(e);
             let weight = 2.0 * penalty * modulus * area(b, f) / volume(e);
-            boundary(f, (e, b), region, weight, lame, flux)
+            boundary(f, (e, b), region, weight, lame, flux).map(Entry::New)
         })
         .collect();
-    (interior, boundary_faces)
+    let (mut old_interior, mut old_boundary) =
+        previous.take().map_or((Vec::new(), Vec::new()), |p| (p.interior.0, p.boundary.0));
+    (resolve(interior, &mut old_interior), resolve(boundary_faces, &mut old_boundary))
 }

@@ -129,6 +129,24 @@ impl DgElements {
     /// Rebuilds the face terms at the current penalty (after the elements
     /// or the fixed regions changed), the rest state and the buffers.
     pub fn refresh(&mut self, mesh: &PolyMesh, fixed: &[FixedRegion]) {
+        self.refresh_around(mesh, fixed, None);
+    }
+
+    /// [`DgElements::refresh`] after a topology change that rebuilt the
+    /// elements `rebuilt` (sorted; the penalty and the fixed regions the
+    /// same): the faces of the other elements keep their integrals.
+    pub fn refresh_after_change(&mut self, mesh: &PolyMesh, fixed: &[FixedRegion], rebuilt: &[u32]) {
+        let mut flags = vec![false; self.store.locate.len()];
+        rebuilt.iter().for_each(|&e| flags[e as usize] = true);
+        let previous = faces::Previous {
+            interior: (std::mem::take(&mut self.interior), std::mem::take(&mut self.interior_index)),
+            boundary: (std::mem::take(&mut self.boundary), std::mem::take(&mut self.boundary_index)),
+            rebuilt: flags,
+        };
+        self.refresh_around(mesh, fixed, Some(previous));
+    }
+
+    fn refresh_around(&mut self, mesh: &PolyMesh, fixed: &[FixedRegion], previous: Option<faces::Previous>) {
         let m = self.size();
         let (store, lame, flux) = (&self.store, self.lame, self.options.flux);
         let basis = |e: u32| -> &DgBasis {
@@ -139,7 +157,7 @@ impl DgElements {
             let (b, i) = store.locate[e as usize];
             store.batches[b as usize].volume[i as usize]
         };
-        let (interior, boundary) = faces::build(mesh, fixed, self.penalty, lame, flux, &basis, &volume);
+        let (interior, boundary) = faces::build(mesh, fixed, self.penalty, lame, flux, &basis, &volume, previous);
         let blocks = |e: u32| (0..m as u32).map(move |a| e * m as u32 + a);
         self.interior_blocks =
             interior.iter().flat_map(|f| blocks(f.elements[0]).chain(blocks(f.elements[1]))).collect();
@@ -190,7 +208,7 @@ impl DgElements {
     /// (nodes of no element read nothing).
     pub fn node_map(&self, mesh: &PolyMesh) -> PointMap {
         let m = self.size();
-        let adjacency = mesh.adjacency();
+        let adjacency = crate::mesh::Adjacency::without_edges(mesh);
         let mut map = PointMap { offsets: vec![0], ..Default::default() };
         let mut values = [0.0; MAX_BASIS];
         for (v, x) in mesh.nodes.iter().enumerate() {
@@ -215,7 +233,7 @@ impl DgElements {
     /// back as hard as a node of a nodal mesh.
     pub fn contact_points(&self, mesh: &PolyMesh) -> (PointMap, Vec<f64>) {
         let m = self.size();
-        let adjacency = mesh.adjacency();
+        let adjacency = crate::mesh::Adjacency::without_edges(mesh);
         let mut map = PointMap { offsets: vec![0], ..Default::default() };
         let mut share = Vec::new();
         let mut values = [0.0; MAX_BASIS];

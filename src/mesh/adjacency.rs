@@ -24,6 +24,20 @@ pub struct Adjacency {
 impl Adjacency {
     /// Builds all tables of `mesh`.
     pub fn new(mesh: &PolyMesh) -> Self {
+        let mut adjacency = Self::without_edges(mesh);
+        for (f, face) in mesh.faces.iter().enumerate() {
+            let v = &face.vertices;
+            for i in 0..v.len() {
+                let (a, b) = (v[i], v[(i + 1) % v.len()]);
+                adjacency.edge_faces.entry((a.min(b), a.max(b))).or_default().push(f as u32);
+            }
+        }
+        adjacency
+    }
+
+    /// The face and node tables of `mesh`, with `edge_faces` left empty
+    /// (the edge table costs more than the others together).
+    pub fn without_edges(mesh: &PolyMesh) -> Self {
         let mut face_elements = vec![[NONE; 2]; mesh.faces.len()];
         for (e, el) in mesh.elements.iter().enumerate() {
             for r in &el.faces {
@@ -52,15 +66,7 @@ impl Adjacency {
                 fill[n as usize] += 1;
             }
         }
-        let mut edge_faces: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
-        for (f, face) in mesh.faces.iter().enumerate() {
-            let v = &face.vertices;
-            for i in 0..v.len() {
-                let (a, b) = (v[i], v[(i + 1) % v.len()]);
-                edge_faces.entry((a.min(b), a.max(b))).or_default().push(f as u32);
-            }
-        }
-        Adjacency { face_elements, node_element_offsets: counts, node_element_ids: ids, edge_faces }
+        Adjacency { face_elements, node_element_offsets: counts, node_element_ids: ids, edge_faces: HashMap::new() }
     }
 
     /// Elements touching node `n`.

@@ -345,6 +345,11 @@ impl Simulation {
         &self.mesh
     }
 
+    /// The sparsity pattern of the system matrix (this topology's).
+    pub fn pattern(&self) -> &SparsePattern {
+        &self.pattern
+    }
+
     /// The element store.
     pub fn store(&self) -> &ElementStore {
         self.elements.store()

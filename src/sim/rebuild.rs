@@ -213,7 +213,7 @@ impl Simulation {
         let undo = (!pinched.is_empty()).then(|| Rollback::around_nodes(mesh, &pinched));
         open_pinched_nodes(&mut self.mesh, &pinched);
         let mesh = &self.mesh;
-        dg.refresh(mesh, &self.boundary.fixed);
+        dg.refresh_after_change(mesh, &self.boundary.fixed, touched);
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
         self.state.refresh_positions(dg.rest());
         dg.corotation.apply_changes(&dg.store, &changes, &self.state.position, self.params.corotated);

@@ -55,7 +55,7 @@ fn groups_around(mesh: &PolyMesh, adjacency: &Adjacency, v: u32) -> Vec<Vec<u32>
 /// The pinched nodes among `candidates` (see the module docs), in
 /// increasing order.
 pub fn pinched_nodes(mesh: &PolyMesh, candidates: impl IntoIterator<Item = u32>) -> Vec<u32> {
-    let adjacency = mesh.adjacency();
+    let adjacency = Adjacency::without_edges(mesh);
     let mut pinched: Vec<u32> =
         candidates.into_iter().filter(|&v| groups_around(mesh, &adjacency, v).len() > 1).collect();
     pinched.sort_unstable();
@@ -69,7 +69,7 @@ pub fn pinched_nodes(mesh: &PolyMesh, candidates: impl IntoIterator<Item = u32>)
 /// renamed. Returns the `(original, copy)` pairs and the elements whose
 /// nodes changed (sorted). Geometry, faces and elements keep their ids.
 pub fn open_pinched_nodes(mesh: &mut PolyMesh, nodes: &[u32]) -> (Vec<(u32, u32)>, Vec<u32>) {
-    let adjacency = mesh.adjacency();
+    let adjacency = Adjacency::without_edges(mesh);
     let mut duplicated = Vec::new();
     let mut changed = Vec::new();
     for &v in nodes {

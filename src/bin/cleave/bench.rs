@@ -8,18 +8,33 @@ use std::time::Instant;
 use serde::Serialize;
 
 use cleave::assembly::SparsePattern;
+use cleave::dg::DgElements;
 use cleave::material::Material;
 use cleave::mesh::{Plane, PolyMesh};
-use cleave::meshing::{box_tet, element_with_vertices, replicate};
-use cleave::sim::{Collider, Simulation, SimulationParams};
+use cleave::meshing::{box_hex, box_tet, element_with_vertices, replicate};
+use cleave::sim::{Collider, FixedRegion, Simulation, SimulationParams};
 use cleave::solve::{Cholesky, LinearSolver, SolverKind};
-use cleave::store::{BasisOptions, ElementStore};
+use cleave::store::dg::{DgOptions, Flux};
+use cleave::store::{BasisOptions, ElementStore, Family};
 use cleave::topology::{split_by_plane, SplitOptions};
 use cleave::Error;
 
 /// A shipped asset, by its path in the crate (`assets/...`).
 fn asset(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets").join(name)
+}
+
+/// A part of the suite, to run alone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Group {
+    /// Tetrahedral element build, pattern, assembly, Cholesky phases.
+    Pipeline,
+    /// Mean value and harmonic basis evaluation and element build.
+    Basis,
+    /// kaufmann2008 Table 1: DG integration, assembly and solve, and cuts.
+    Dg,
+    /// Global assembly, corotated steps and cuts on large meshes.
+    Steps,
 }
 
 /// One measured stage.
@@ -179,11 +194,33 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
     Ok(out)
 }
 
-/// Runs the suite (`quick`: small meshes, for smoke tests).
-pub(crate) fn run_suite(quick: bool) -> Result<Report, Error> {
+/// Runs the suite, or the group `only` (`quick`: small meshes, for smoke
+/// tests).
+pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Error> {
+    let run = |group: Group| only.is_none_or(|o| o == group);
+    let material = Material::new(1e5, 0.3, 1000.0)?;
+    let mut out = Vec::new();
+    if run(Group::Pipeline) {
+        out.extend(pipeline_measurements(quick, &material)?);
+    }
+    if run(Group::Basis) {
+        out.extend(basis_measurements(quick, &material)?);
+        out.extend(harmonic_measurements(quick, &material)?);
+    }
+    if run(Group::Dg) {
+        out.extend(table1_measurements(quick)?);
+    }
+    if run(Group::Steps) {
+        out.extend(step_suite(quick, &material)?);
+    }
+    Ok(Report { threads: rayon::current_num_threads(), measurements: out })
+}
+
+/// Tetrahedral `K_e` build, sparse pattern, assembly and the three Cholesky
+/// phases on a box of tetrahedra.
+fn pipeline_measurements(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
     let cells = if quick { [16, 4, 4] } else { [64, 16, 16] };
     let mesh = box_tet([0.0; 3], [4.0, 1.0, 1.0], cells)?;
-    let material = Material::new(1e5, 0.3, 1000.0)?;
     let label = format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]);
     let (ne, nn) = (mesh.elements.len(), mesh.nodes.len());
     let mut out = Vec::new();
@@ -198,7 +235,7 @@ pub(crate) fn run_suite(quick: bool) -> Result<Report, Error> {
             extra,
         })
     };
-    let (ms, store) = best_ms(5, || ElementStore::build(&mesh, &material, &BasisOptions::default()));
+    let (ms, store) = best_ms(5, || ElementStore::build(&mesh, material, &BasisOptions::default()));
     let store = store?;
     push("tet K_e build", ms, None);
     let (ms, pattern) = best_ms(3, || SparsePattern::build(mesh.nodes.len(), &store));
@@ -218,19 +255,30 @@ pub(crate) fn run_suite(quick: bool) -> Result<Report, Error> {
     let (ms, r) = best_ms(2, || chol.factor(pattern.matrix(&values)));
     r?;
     push("cholesky numeric", ms, None);
+    let mut parallel = Cholesky::new(faer::Par::rayon(0));
+    parallel.analyze(pattern.symbolic.as_ref())?;
+    let (ms_parallel, r) = best_ms(2, || parallel.factor(pattern.matrix(&values)));
+    r?;
+    push("cholesky numeric (rayon)", ms_parallel, Some(("sequential / rayon".into(), ms / ms_parallel)));
     let b = vec![1.0; 3 * nn];
     let mut x = vec![0.0; 3 * nn];
     let (ms, r) = best_ms(3, || chol.solve(pattern.matrix(&values), &b, &mut x));
     r?;
     push("cholesky solve", ms, None);
-    // mean value elements: basis evaluation and K_e build per vertex count
+    Ok(out)
+}
+
+/// Mean value elements per vertex count: basis evaluation (SIMD and
+/// scalar) and `K_e` build.
+fn basis_measurements(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
+    let mut out = Vec::new();
     let copies = if quick { 1000 } else { 10_000 };
     for k in [8, 12, 16, 24] {
         let Some(one) = element_with_vertices(k) else { continue };
         let (simd_ms, points) = basis_eval_ms(&one, copies, EvalKernel::MeanValue);
         let (scalar_ms, _) = basis_eval_ms(&one, copies, EvalKernel::MeanValueScalar);
         let batch = replicate(&one, copies)?;
-        let (ms, store) = best_ms(3, || ElementStore::build(&batch, &material, &BasisOptions::default()));
+        let (ms, store) = best_ms(3, || ElementStore::build(&batch, material, &BasisOptions::default()));
         store?;
         let m = |name, ms, extra| per_element(copies, k, name, ms, extra);
         out.push(m(
@@ -241,15 +289,21 @@ pub(crate) fn run_suite(quick: bool) -> Result<Report, Error> {
         out.push(m(format!("MV basis k={k} scalar"), scalar_ms, Some(("simd speed-up".into(), scalar_ms / simd_ms))));
         out.push(m(format!("MV K_e build k={k}"), ms, None));
     }
-    out.extend(harmonic_measurements(quick, &material)?);
-    // global assembly on a mixed mesh of about 100k elements
+    Ok(out)
+}
+
+/// Global assembly on a mixed mesh of about 100k elements, corotated
+/// implicit steps and cuts on the bunnies (where their assets are), and
+/// steps on a large box.
+fn step_suite(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
+    let mut out = Vec::new();
     let cells = if quick { [12, 6, 6] } else { [40, 20, 20] };
     let mut mixed = box_tet([0.0; 3], [2.0, 1.0, 1.0], cells)?;
     for (i, x) in [0.31, 0.77, 1.23, 1.61].iter().enumerate() {
         let normal = [1.0, 0.3 * i as f64, -0.2];
         split_by_plane(&mut mixed, &Plane { point: [*x, 0.5, 0.5], normal }, &SplitOptions::default())?;
     }
-    let store = ElementStore::build(&mixed, &material, &BasisOptions::default())?;
+    let store = ElementStore::build(&mixed, material, &BasisOptions::default())?;
     let pattern = SparsePattern::build(mixed.nodes.len(), &store);
     let mut values = vec![0.0; pattern.nnz()];
     let (ms, ()) =
@@ -279,7 +333,103 @@ pub(crate) fn run_suite(quick: bool) -> Result<Report, Error> {
     let cells = if quick { [16, 4, 4] } else { [100, 50, 34] };
     let mesh = box_tet([0.0; 3], [2.0, 1.0, 0.68], cells)?;
     out.extend(step_measurements(&format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]), mesh, SolverKind::Cg, 3)?);
-    Ok(Report { threads: rayon::current_num_threads(), measurements: out })
+    Ok(out)
+}
+
+/// kaufmann2008 Table 1 (ms on a Core 2 Duo 2.4 GHz): integration,
+/// assembly and solve of BZ and IP with degrees 1 and 2 on 10x10x10
+/// hexahedra, and trilinear CG on 15x15x15.
+const TABLE1: [(&str, [f64; 3]); 5] = [
+    ("DG BZ p1", [532.0, 22.0, 656.0]),
+    ("DG IP p1", [1437.0, 87.0, 734.0]),
+    ("DG BZ p2", [3062.0, 152.0, 7797.0]),
+    ("DG IP p2", [8344.0, 621.0, 8484.0]),
+    ("CG trilinear", [3750.0, 41.0, 641.0]),
+];
+
+/// The rows of kaufmann2008 Table 1, measured: a 1 m cube of 10x10x10
+/// hexahedra (E = 1e5 Pa, ν = 0.3) held weakly at x = 0, per flux and
+/// degree the integration (element and face terms: [`ElementStore::build`]
+/// and [`DgElements::new`]), the assembly of `K` and the direct solve of
+/// `K u = f_gravity` (factorisation and substitution, the ordering and
+/// symbolic analysis done once before), each row with the paper's time
+/// over ours; the trilinear CG row on 15x15x15 hexahedra (the same number
+/// of unknowns); and a plane cut of the IP degree 1 body, whose
+/// re-integration (only the faces it changed) is set against the full one.
+fn table1_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
+    let (n_dg, n_cg) = if quick { (4, 6) } else { (10, 15) };
+    let material = Material::new(1e5, 0.3, 1000.0)?;
+    let mut rows = Vec::new();
+    for (index, (name, paper)) in TABLE1.iter().enumerate() {
+        let dg = (index < 4).then_some(DgOptions {
+            degree: if index < 2 { 1 } else { 2 },
+            flux: if index % 2 == 0 { Flux::Bz } else { Flux::Ip },
+            penalty: 1.0,
+        });
+        let n = if dg.is_some() { n_dg } else { n_cg };
+        let mesh = box_hex([0.0; 3], [1.0; 3], [n; 3])?;
+        let basis = match dg {
+            Some(dg) => BasisOptions { family: Family::Dg, dg, ..Default::default() },
+            None => BasisOptions { family: Family::Harmonic, ..Default::default() },
+        };
+        let fixed = FixedRegion::clamp([-1.0; 3], [1e-6, 2.0, 2.0]);
+        let (integration, ()) = best_ms(3, || {
+            let store = ElementStore::build(&mesh, &material, &basis);
+            if let (Ok(store), Some(dg)) = (store, dg) {
+                std::hint::black_box(DgElements::new(&mesh, store, dg, std::slice::from_ref(&fixed)));
+            }
+        });
+        let params = SimulationParams {
+            material,
+            basis,
+            gravity: [0.0, -9.81, 0.0],
+            solver: SolverKind::Cholesky,
+            ..Default::default()
+        };
+        let mut sim = Simulation::new(mesh, params)?;
+        sim.fix(fixed)?;
+        sim.solve_static()?;
+        let (mut assembly, mut solve) = (f64::INFINITY, f64::INFINITY);
+        for _ in 0..3 {
+            let before = *sim.timings();
+            sim.solve_static()?;
+            let t = *sim.timings();
+            assembly = assembly.min(1e3 * (t.assembly - before.assembly));
+            solve = solve.min(1e3 * (t.solve - before.solve));
+        }
+        let unknowns = 3 * sim.masses().len();
+        let fill = 100.0 * sim.pattern().nnz() as f64 / (unknowns as f64).powi(2);
+        let penalty = sim.dg().map_or(String::new(), |d| format!(", eta {}", d.penalty));
+        let label = format!("hex {n}^3, {unknowns} DOFs{penalty}");
+        let (ne, nn) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
+        let m = |stage: &str, ms: f64, extra: (String, f64)| Measurement {
+            name: format!("{name} {stage}"),
+            mesh: label.clone(),
+            elements: ne,
+            nodes: nn,
+            ms,
+            elements_per_s: ne as f64 / (ms * 1e-3),
+            extra: Some(extra),
+        };
+        let vs = |i: usize, ms: f64| ("paper / ours".to_string(), paper[i] / ms);
+        rows.push(m("integration", integration, vs(0, integration)));
+        rows.push(m("assembly", assembly, vs(1, assembly)));
+        rows.push(m("solve", solve, vs(2, solve)));
+        rows.push(m("fill", 0.0, ("nonzeros %".into(), fill)));
+        if index == 1 {
+            let (before, faces_before) = (*sim.timings(), sim.faces_integrated());
+            let total: usize = sim.mesh().elements.iter().map(|e| e.faces.len()).sum();
+            let t = Instant::now();
+            sim.cut_plane(&Plane { point: [0.53, 0.5, 0.5], normal: [1.0, 0.3, 0.2] })?;
+            let cut = t.elapsed().as_secs_f64() * 1e3;
+            let reintegration = 1e3 * (sim.timings().basis - before.basis);
+            let share = 100.0 * (sim.faces_integrated() - faces_before) as f64 / total as f64;
+            rows.push(m("cut re-integration", reintegration, ("full / cut".into(), integration / reintegration)));
+            rows.push(m("cut faces integrated", 0.0, ("% of faces".into(), share)));
+            rows.push(m("cut (to ready)", cut, ("full integration ms".into(), integration)));
+        }
+    }
+    Ok(rows)
 }
 
 /// Wall time per step of the bunny before and after two plane cuts (the

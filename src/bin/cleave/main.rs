@@ -49,6 +49,9 @@ enum Command {
         /// Smaller meshes, for a quick check.
         #[arg(long)]
         quick: bool,
+        /// Run one part of the suite only.
+        #[arg(long, value_enum)]
+        only: Option<bench::Group>,
     },
 }
 
@@ -115,9 +118,9 @@ fn run(cli: Cli) -> Result<(), String> {
                 Err(format!("{} problem(s) found (first 20 shown)", problems.len()))
             }
         }
-        Command::Bench { json, threads, quick } => {
+        Command::Bench { json, threads, quick, only } => {
             set_threads(threads)?;
-            let report = bench::run_suite(quick).map_err(|e| e.to_string())?;
+            let report = bench::run_suite(quick, only).map_err(|e| e.to_string())?;
             println!("{}", report.to_table());
             if let Some(path) = json {
                 let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
