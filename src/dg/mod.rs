@@ -61,6 +61,23 @@ fn mat_vec(b: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
     rotate(b, v)
 }
 
+/// The consistency blocks of an interior face (`r2 = 2m` local functions)
+/// for the local pair `(α, β)` with signs `χ`: the one from `β`'s side (warped by its rotation
+/// `r_t`) and the one from `α`'s side (warped by `r_s`), before the second
+/// is transposed (see [`faces`]).
+fn consistency_pair(
+    f: &InteriorFace,
+    r2: usize,
+    (alpha, beta): (usize, usize),
+    (chi_s, chi_t): (f64, f64),
+    (rs, rt): (&[f64; 9], &[f64; 9]),
+    (lambda, mu): (f64, f64),
+) -> ([f64; 9], [f64; 9]) {
+    let b1 = consistency_block(rotate(rt, f.normal), rotate(rt, f.grad[alpha * r2 + beta]), 0.5 * chi_s, lambda, mu);
+    let b2 = consistency_block(rotate(rs, f.normal), rotate(rs, f.grad[beta * r2 + alpha]), 0.5 * chi_t, lambda, mu);
+    (b1, b2)
+}
+
 #[inline]
 fn mat_t_vec(b: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|i| b[i] * v[0] + b[3 + i] * v[1] + b[6 + i] * v[2])
@@ -434,21 +451,7 @@ impl DgElements {
             let p = f.weight * chi_s * chi_t * f.mass[alpha * r2 + beta];
             let mut block = [p, 0.0, 0.0, 0.0, p, 0.0, 0.0, 0.0, p];
             if consistent {
-                let rs = rot(alpha);
-                let b1 = consistency_block(
-                    rotate(rt, f.normal),
-                    rotate(rt, f.grad[alpha * r2 + beta]),
-                    0.5 * chi_s,
-                    lambda,
-                    mu,
-                );
-                let b2 = consistency_block(
-                    rotate(rs, f.normal),
-                    rotate(rs, f.grad[beta * r2 + alpha]),
-                    0.5 * chi_t,
-                    lambda,
-                    mu,
-                );
+                let (b1, b2) = consistency_pair(f, r2, (alpha, beta), (chi_s, chi_t), (rot(alpha), rt), (lambda, mu));
                 let b2 = transpose(b2);
                 (0..9).for_each(|q| block[q] += b1[q] + b2[q]);
             }
@@ -510,20 +513,7 @@ impl DgElements {
                     let mut fa = [p * u[beta][0], p * u[beta][1], p * u[beta][2]];
                     if consistent {
                         let rs = if warp { this.rotation(f.elements[s]) } else { &IDENTITY };
-                        let b1 = consistency_block(
-                            rotate(rt, f.normal),
-                            rotate(rt, f.grad[alpha * r2 + beta]),
-                            0.5 * chi_s,
-                            lambda,
-                            mu,
-                        );
-                        let b2 = consistency_block(
-                            rotate(rs, f.normal),
-                            rotate(rs, f.grad[beta * r2 + alpha]),
-                            0.5 * chi_t,
-                            lambda,
-                            mu,
-                        );
+                        let (b1, b2) = consistency_pair(f, r2, (alpha, beta), (chi_s, chi_t), (rs, rt), (lambda, mu));
                         let (v1, v2) = (mat_vec(&b1, z[t][beta]), mat_t_vec(&b2, z[s][beta]));
                         (0..3).for_each(|k| fa[k] += v1[k] + v2[k]);
                     }

@@ -200,6 +200,16 @@ impl Simulation {
         let t = std::time::Instant::now();
         dg.stabilise(mesh, fixed, &self.pattern)?;
         self.timings.add(Phase::Solve, t.elapsed().as_secs_f64());
+        self.refresh_dg_dependents()
+    }
+
+    /// For the discontinuous Galerkin family, after its elements, face
+    /// terms and pattern changed: masses and loads, the stitch and
+    /// collision maps, the step's system, the body loads and the embedding.
+    fn refresh_dg_dependents(&mut self) -> Result<(), Error> {
+        let (Model::Dg(dg), mesh) = (&self.elements, &self.mesh) else {
+            return Ok(());
+        };
         let density = self.params.material.density;
         (self.masses, self.loads) = (dg.masses(density), dg.loads(density));
         self.nodes.map = dg.node_map(mesh);

@@ -220,19 +220,10 @@ impl Simulation {
         let t = std::time::Instant::now();
         self.pattern = crate::assembly::SparsePattern::build(blocks, &**dg);
         self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
-        let density = self.params.material.density;
-        (self.masses, self.loads) = (dg.masses(density), dg.loads(density));
-        self.nodes.map = dg.node_map(mesh);
-        self.contacts = Some(dg.contact_points(mesh));
-        self.nodes.refresh(&self.state);
-        let p = &self.params;
-        self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
-        self.statics = None;
         self.surface = mesh.boundary_triangles();
         self.faces_integrated += changes.faces_integrated;
-        self.refresh_body_loads();
         // (the caller's rollback undoes the cut; the opened nodes first)
-        self.refresh_embedding().inspect_err(|_| {
+        self.refresh_dg_dependents().inspect_err(|_| {
             if let Some(undo) = undo {
                 undo.restore(&mut self.mesh);
             }

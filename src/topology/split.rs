@@ -421,14 +421,16 @@ fn split_is_healthy(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], plane:
             }
         }
         let centroid = scale(centroid, 1.0 / volume);
+        let d = diameter(&xs);
         // the quadrature of a mean value element takes cones from its
-        // centroid to its faces: every face must see the centroid inside
+        // centroid to its faces: every face must see the centroid inside;
+        // and no face may be a sliver of no area (a clipped loop whose
+        // points snapping left on one line)
         let star = keyed.iter().all(|lp| {
             let pts: Vec<[f64; 3]> = lp.iter().map(|p| p.1).collect();
             let g = crate::mesh::face_geometry(&pts, &(0..pts.len() as u32).collect::<Vec<_>>());
-            dot(sub(centroid, g.centroid), g.normal) < 0.0
+            dot(sub(centroid, g.centroid), g.normal) < 0.0 && g.area > MIN_FACE_AREA * d * d
         });
-        let d = diameter(&xs);
         let spacing = (0..xs.len())
             .flat_map(|i| (i + 1..xs.len()).map(move |j| (i, j)))
             .map(|(i, j)| norm(sub(xs[i], xs[j])))
@@ -504,6 +506,11 @@ fn cap_loop<K: Copy + Eq + std::hash::Hash + Ord>(faces: &[Vec<K>]) -> Option<Ve
     }
     (lp.len() == next.len() && lp.len() >= 3).then_some(lp)
 }
+
+/// The smallest area of a face of a split part, relative to the square of
+/// the part's diameter: far below any face a cut makes on purpose, far
+/// above the rounding left in a loop whose points lie on one line.
+const MIN_FACE_AREA: f64 = 1e-10;
 
 /// Relative height above which a cap point is off the plane (of the cap's
 /// diameter): far below the `1e-3` planarity of a valid face, far above
