@@ -8,6 +8,8 @@
 
 use std::f64::consts::PI;
 
+mod common;
+
 use cleave::material::Material;
 use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
@@ -16,7 +18,6 @@ use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::store::dg::{DgOptions, Flux};
 use cleave::store::{BasisOptions, Family};
 use cleave::topology::{split_by_plane, SplitOptions};
-use cleave_kernels::quadrature::cone_rule;
 
 const Q: [f64; 3] = [1e-3, -2e-3, 1.5e-3];
 
@@ -51,12 +52,7 @@ fn l2_error(sim: &Simulation) -> f64 {
     let mut sum = 0.0;
     let mut n = vec![0.0; m];
     for e in 0..mesh.elements.len() {
-        let nodes = &mesh.elements[e].nodes;
-        let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
-        let tris: Vec<[u32; 3]> =
-            mesh.element_triangles(e).map(|t| t.map(|g| nodes.binary_search(&g).unwrap() as u32)).collect();
-        let (mut pts, mut wts) = (Vec::new(), Vec::new());
-        cone_rule(&verts, &tris, mesh.element_centroid(e), 5, &mut pts, &mut wts);
+        let (pts, wts) = common::element_cone_rule(mesh, e, 5);
         let basis = dg.basis(e as u32);
         for (p, w) in pts.iter().zip(&wts) {
             basis.values(*p, &mut n);

@@ -5,6 +5,8 @@
 //! valid for non-convex, even not star-shaped, elements since the signed
 //! volumes cancel outside), and against closed forms.
 
+mod common;
+
 use cleave::material::Material;
 use cleave::mesh::{Plane, PolyMesh};
 use cleave::meshing::{box_l_prisms, box_tet, prism, random_convex};
@@ -12,7 +14,6 @@ use cleave::store::dg::{DgOptions, Flux};
 use cleave::store::{BasisOptions, ElementStore, Family};
 use cleave::topology::{cut_by_plane, SplitOptions};
 use cleave_kernels::polynomial::{count, values, EXPONENTS};
-use cleave_kernels::quadrature::cone_rule;
 
 fn basis(degree: usize) -> BasisOptions {
     BasisOptions { family: Family::Dg, dg: DgOptions { degree, flux: Flux::Ip, penalty: 1.0 }, ..Default::default() }
@@ -45,12 +46,7 @@ fn meshes() -> Vec<(&'static str, PolyMesh)> {
 /// `∫ ξ^α dV_ξ` of element `e` in the frame `(c, s)` by the signed cone
 /// rule (`n = 5` points per direction).
 fn reference_moments(mesh: &PolyMesh, e: usize, frame: [f64; 4], d: usize) -> Vec<f64> {
-    let nodes = &mesh.elements[e].nodes;
-    let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
-    let tris: Vec<[u32; 3]> =
-        mesh.element_triangles(e).map(|t| t.map(|g| nodes.binary_search(&g).unwrap() as u32)).collect();
-    let (mut pts, mut wts) = (Vec::new(), Vec::new());
-    cone_rule(&verts, &tris, mesh.element_centroid(e), 5, &mut pts, &mut wts);
+    let (pts, wts) = common::element_cone_rule(mesh, e, 5);
     let s = frame[3];
     let mut out = vec![0.0; count(d)];
     let mut m = vec![0.0; count(4)];
@@ -105,12 +101,7 @@ fn bases_are_orthonormal_under_the_reference_rule() {
             let m = batch.k;
             for (i, b) in batch.dg.iter().enumerate() {
                 let e = batch.elements[i] as usize;
-                let nodes = &mesh.elements[e].nodes;
-                let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
-                let tris: Vec<[u32; 3]> =
-                    mesh.element_triangles(e).map(|t| t.map(|g| nodes.binary_search(&g).unwrap() as u32)).collect();
-                let (mut pts, mut wts) = (Vec::new(), Vec::new());
-                cone_rule(&verts, &tris, mesh.element_centroid(e), 4, &mut pts, &mut wts);
+                let (pts, wts) = common::element_cone_rule(&mesh, e, 4);
                 let mut gram = vec![0.0; m * m];
                 let mut n = vec![0.0; m];
                 for (p, w) in pts.iter().zip(&wts) {

@@ -176,3 +176,15 @@ pub fn spectra(store: &cleave::store::ElementStore, floor: f64) -> SpectrumSumma
     assert!(out.asymmetry <= 1e-12, "asymmetry {:.2e}", out.asymmetry);
     out
 }
+
+/// The signed cone rule over element `e` of `mesh` from its centroid
+/// (`n` points per direction): points (m) and weights (m³).
+pub fn element_cone_rule(mesh: &cleave::mesh::PolyMesh, e: usize, n: usize) -> (Vec<[f64; 3]>, Vec<f64>) {
+    let nodes = &mesh.elements[e].nodes;
+    let verts: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
+    let tris: Vec<[u32; 3]> =
+        mesh.element_triangles(e).map(|t| t.map(|g| nodes.binary_search(&g).unwrap() as u32)).collect();
+    let (mut pts, mut wts) = (Vec::new(), Vec::new());
+    cleave_kernels::quadrature::cone_rule(&verts, &tris, mesh.element_centroid(e), n, &mut pts, &mut wts);
+    (pts, wts)
+}
