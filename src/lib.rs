@@ -39,6 +39,7 @@ pub mod scene;
 pub mod sim;
 pub mod solve;
 pub mod store;
+pub mod surface;
 pub mod topology;
 
 use thiserror::Error;
@@ -61,6 +62,9 @@ pub enum Error {
     /// A plane split failed.
     #[error(transparent)]
     Split(#[from] topology::SplitError),
+    /// A surface does not bound a solid.
+    #[error("invalid surface: {0}")]
+    Surface(#[from] surface::SurfaceError),
     /// A linear solve failed.
     #[error("solve failed: {0}")]
     Solve(#[from] solve::SolveError),

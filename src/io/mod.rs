@@ -7,12 +7,14 @@
 //! | TetGen `.node` + `.ele` | yes | yes |
 //! | VTK `.vtu` (tetra, hexahedron, polyhedron) | yes | yes |
 //! | Wavefront `.obj` triangle surface | yes (tobj) | boundary surface |
+//! | STL triangle surface (ASCII, binary) | yes (stl_io) | no |
 //!
 //! Every error names the file and, for text formats, the line.
 
 mod gmsh;
 mod medit;
 mod obj;
+mod stl;
 mod tetgen;
 mod tokens;
 mod vtu;
@@ -26,6 +28,7 @@ use crate::mesh::{MeshError, PolyMesh};
 pub use gmsh::{read_gmsh, write_gmsh};
 pub use medit::{read_medit, write_medit};
 pub use obj::{read_obj_surface, write_boundary_obj, write_surface_obj, Surface};
+pub use stl::{read_stl_surface, read_surface};
 pub use tetgen::{read_tetgen, write_tetgen};
 pub use vtu::{read_vtu, write_vtu, VtuFields};
 

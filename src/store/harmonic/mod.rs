@@ -6,7 +6,12 @@
 //! Integration: the element is split into the sub-tetrahedra from a point
 //! that sees its whole boundary (a star point; found for convex and
 //! star-shaped non-convex elements), each integrated by a collapsed Gauss
-//! rule of `quadrature_order^3` points. The gradients are then shifted per
+//! rule of `quadrature_order^3` points. An element with no star point is
+//! first cut by a grid of half its diameter into the exact pieces
+//! `element ∩ box` (the grid slicer of [`crate::meshing::grid_slice`]),
+//! finer where a piece is still not star-shaped: every sub-tetrahedron
+//! then lies inside the element and has a positive weight, so any
+//! planar-faced polyhedron is integrated. The gradients are then shifted per
 //! element so that `Σ_q w_q ∇N_a = ∮ b_a n`, with the face moments shared by
 //! both sides of every face: the discrete divergence theorem holds exactly
 //! and the patch test passes whatever the MFS error. Masses are lumped by
@@ -138,14 +143,58 @@ pub fn star_point(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64) -> 
     None
 }
 
+/// How many times a piece without a star point is sliced again, each time
+/// by a grid twice as fine.
+const SLICE_LEVELS: usize = 3;
+
+/// Adds the cone rules of the pieces of the closed surface `surface` cut
+/// by a grid of cell `cell` (m), slicing again where a piece has no star
+/// point; false where that fails `levels` deep.
+fn sliced_rule(surface: &crate::io::Surface, cell: f64, order: usize, levels: usize, points: &mut Vec<[f64; 3]>, weights: &mut Vec<f64>) -> bool {
+    let Ok((pieces, _)) = crate::meshing::grid_slice(surface, cell, 0.0) else { return false };
+    (0..pieces.elements.len()).all(|e| {
+        let verts: Vec<[f64; 3]> = pieces.elements[e].nodes.iter().map(|&v| pieces.nodes[v as usize]).collect();
+        let local = |g: u32| pieces.elements[e].nodes.binary_search(&g).map(|i| i as u32).unwrap_or(0);
+        let triangles: Vec<[u32; 3]> = pieces.element_triangles(e).map(|t| t.map(local)).collect();
+        // a thin piece has no point clear of its faces, but a convex one is
+        // seen whole from its centroid
+        let centroid = Some(pieces.element_centroid(e)).filter(|_| pieces.is_convex(e, 0.0));
+        match star_point(&verts, &triangles, pieces.element_diameter(e)).or(centroid) {
+            Some(apex) => {
+                cone_rule(&verts, &triangles, apex, order, points, weights);
+                true
+            }
+            None => {
+                levels > 0
+                    && sliced_rule(&crate::io::Surface { vertices: verts, triangles }, 0.5 * cell, order, levels - 1, points, weights)
+            }
+        }
+    })
+}
+
+/// The quadrature rule of an element from its vertices and outward
+/// triangles (see the module docs); `None` if no slicing gives pieces with
+/// star points.
+pub fn element_rule(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64, order: usize) -> Option<(Vec<[f64; 3]>, Vec<f64>)> {
+    let (mut points, mut weights) = (Vec::new(), Vec::new());
+    match star_point(verts, triangles, diameter) {
+        Some(apex) => cone_rule(verts, triangles, apex, order, &mut points, &mut weights),
+        None => {
+            let surface = crate::io::Surface { vertices: verts.to_vec(), triangles: triangles.to_vec() };
+            if !sliced_rule(&surface, 0.5 * diameter, order, SLICE_LEVELS, &mut points, &mut weights) {
+                return None;
+            }
+        }
+    }
+    Some((points, weights))
+}
+
 /// Per-thread scratch of the batch build.
 struct Scratch {
     phi: Vec<f64>,
     grad: Vec<f64>,
     gram: Vec<f64>,
     moments: Vec<[f64; 3]>,
-    points: Vec<[f64; 3]>,
-    weights: Vec<f64>,
     /// The basis kernel's workspace.
     stack: MemBuffer,
 }
@@ -161,26 +210,39 @@ pub(super) fn build_batch(
     elements: Vec<u32>,
 ) -> Result<Batch, BasisError> {
     let (lambda, mu) = material.lame();
-    let nq = (2 * k - 4) * options.quadrature_order.pow(3);
+    // the rules first: elements sliced for want of a star point have more
+    // points, and the batch holds as many per element as the largest rule
+    // (the others padded with points of zero weight)
+    let rules: Vec<(Vec<[f64; 3]>, Vec<f64>)> = elements
+        .par_iter()
+        .map(|&e| {
+            let el = &mesh.elements[e as usize];
+            let verts: Vec<[f64; 3]> = el.nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
+            let local = |g: u32| el.nodes.binary_search(&g).map(|i| i as u32).unwrap_or(0);
+            let triangles: Vec<[u32; 3]> = mesh.element_triangles(e as usize).map(|t| t.map(local)).collect();
+            element_rule(&verts, &triangles, mesh.element_diameter(e as usize), options.quadrature_order)
+                .ok_or(BasisError::NotStarShaped { element: e as usize })
+        })
+        .collect::<Result<_, _>>()?;
+    let rule_of: std::collections::HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
+    let nq = rules.iter().map(|r| r.0.len()).max().unwrap_or(0);
     let scratch = || Scratch {
         phi: vec![0.0; k * nq],
         grad: vec![0.0; 3 * k * nq],
         gram: vec![0.0; elasticity::stiffness_scratch_len(k, nq)],
         moments: vec![[0.0; 3]; k],
-        points: Vec::with_capacity(nq),
-        weights: Vec::with_capacity(nq),
         stack: MemBuffer::new(harmonic::evaluate_scratch(k)),
     };
     fill_batch(mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
-        let Slots { element, verts, triangles, volume, mass_fraction, stiffness, stress_grads, points, weights } = slot;
+        let Slots { element, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
         let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
-        let apex = star_point(verts, triangles, mesh.element_diameter(element))
-            .ok_or(BasisError::NotStarShaped { element })?;
-        s.points.clear();
-        s.weights.clear();
-        cone_rule(verts, triangles, apex, options.quadrature_order, &mut s.points, &mut s.weights);
-        points.copy_from_slice(&s.points);
-        weights.copy_from_slice(&s.weights);
+        let (rule_points, rule_weights) = &rules[rule_of[&(element as u32)]];
+        let m = rule_points.len();
+        points[..m].copy_from_slice(rule_points);
+        weights[..m].copy_from_slice(rule_weights);
+        // padding: a point of the rule, weighted zero
+        points[m..].fill(rule_points[0]);
+        weights[m..].fill(0.0);
         let v: f64 = weights.iter().sum();
         if !(v > 0.0) {
             return Err(degenerate());
