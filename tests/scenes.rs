@@ -107,6 +107,26 @@ fn bad_input_ends_in_one_clear_error() {
     std::fs::write(&p, merge("0.02")).unwrap();
     let (ok, _, err) = cleave(&["run", p.to_str().unwrap(), "--out", d.join("m").to_str().unwrap()]);
     assert!(ok, "a valid threshold runs: {err}");
+    // surfaces: one without [meshing], an open one, [meshing] on a volume mesh
+    let cube_obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n\
+        f 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\nf 1 2 6\nf 1 6 5\nf 3 7 8\nf 3 8 4\nf 1 5 7\nf 1 7 3\nf 2 4 8\nf 2 8 6\n";
+    std::fs::write(d.join("cube.obj"), cube_obj).unwrap();
+    std::fs::write(d.join("open.obj"), cube_obj.trim_end().rsplit_once('\n').unwrap().0).unwrap();
+    let sliced = |file: &str| {
+        scene_with_mesh(file).replace("[material]", "[meshing]\nmethod = \"grid-slice\"\ncell = 0.3\n[material]")
+    };
+    let err = run_fails(d, &scene_with_mesh("cube.obj"));
+    assert!(err.contains("mesh.file") && err.contains("[meshing]"), "{err}");
+    let err = run_fails(d, &sliced("open.obj"));
+    assert!(err.contains("open") && err.contains("edge"), "{err}");
+    let err = run_fails(d, &sliced("good.mesh"));
+    assert!(err.contains("meshing") && err.contains(".obj or .stl"), "{err}");
+    let err = run_fails(d, &sliced("cube.obj").replace("cell = 0.3", "cell = -1"));
+    assert!(err.contains("meshing.cell"), "{err}");
+    let p = d.join("sliced.toml");
+    std::fs::write(&p, sliced("cube.obj")).unwrap();
+    let (ok, _, err) = cleave(&["run", p.to_str().unwrap(), "--out", d.join("s").to_str().unwrap()]);
+    assert!(ok, "a sliced cube runs: {err}");
     // an unconstrained body is singular
     let err = run_fails(
         d,

@@ -4,10 +4,11 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use super::{BoxElement, Generator, LoadedScene, Mode, SceneError};
-use crate::io::{read_mesh, read_obj_surface};
+use super::{BoxElement, Generator, LoadedScene, MeshingMethod, Mode, SceneError};
+use crate::io::{read_mesh, read_surface};
 use crate::mesh::PolyMesh;
-use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, prism, random_convex};
+use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, grid_slice, octree, prism, random_convex};
+use crate::surface::prepare;
 use crate::output::{write_frame, write_summary, DgSummary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{EmbeddedSurface, Located, Simulation};
 use crate::topology::merge_slivers;
@@ -42,7 +43,22 @@ impl LoadedScene {
     fn read_or_generate_mesh(&self) -> Result<PolyMesh, SceneError> {
         let m = &self.scene.mesh;
         if let Some(file) = &m.file {
-            return read_mesh(&self.resolve(file)).map_err(|e| self.engine(e));
+            let path = self.resolve(file);
+            return match &self.scene.meshing {
+                None => read_mesh(&path).map_err(|e| self.engine(e)),
+                Some(me) => {
+                    let raw = read_surface(&path).map_err(|e| self.engine(e))?;
+                    let (surface, _) = prepare(&raw).map_err(|e| self.engine(e))?;
+                    let meshed = match me.method {
+                        MeshingMethod::GridSlice => {
+                            grid_slice(&surface, me.cell.unwrap_or(f64::NAN), me.merge_below.unwrap_or(0.05))
+                                .map(|(mesh, _)| mesh)
+                        }
+                        MeshingMethod::Octree => octree(&surface, me.max_depth.unwrap_or(0)).map(|(mesh, _)| mesh),
+                    };
+                    meshed.map_err(|e| self.engine(e))
+                }
+            };
         }
         let (min, max) = (m.min.unwrap_or([0.0; 3]), m.max.unwrap_or([1.0; 3]));
         let generated: Result<PolyMesh, Error> = match (m.generator, m.element) {
@@ -95,7 +111,7 @@ impl LoadedScene {
             sim.add_collider(c.collider().map_err(|e| self.engine(e))?);
         }
         if let Some(file) = &s.mesh.embed {
-            let surface = read_obj_surface(&self.resolve(file)).map_err(|e| self.engine(e))?;
+            let surface = read_surface(&self.resolve(file)).map_err(|e| self.engine(e))?;
             let surface = EmbeddedSurface { vertices: surface.vertices, triangles: surface.triangles };
             sim.embed(surface).map_err(engine)?;
         }

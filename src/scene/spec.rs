@@ -113,12 +113,26 @@ pub enum BoxElement {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MeshingSpec {
-    /// `"grid-slice"` or `"octree"`.
-    pub method: String,
-    /// Cell size (m).
+    /// How the inside is filled.
+    pub method: MeshingMethod,
+    /// Grid cell size (m), for `grid-slice`.
     pub cell: Option<f64>,
-    /// Octree depth.
+    /// Octree depth (1..=10), for `octree`.
     pub max_depth: Option<usize>,
+    /// `grid-slice`: pieces below this fraction of a cell's volume are
+    /// merged into a face neighbour (default 0.05).
+    pub merge_below: Option<f64>,
+}
+
+/// Meshing methods for surface input.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeshingMethod {
+    /// Slice by a regular grid into hexahedra and exact cut-out pieces
+    /// (kaufmann2008 §10).
+    GridSlice,
+    /// Embed in an adaptive octree (martin2008 §7).
+    Octree,
 }
 
 /// `[material]`.
@@ -543,8 +557,41 @@ impl Scene {
                 return Err(s.invalid("mesh.merge_slivers", q, "a quality threshold in (0, 1), e.g. 0.02"));
             }
         }
-        if self.meshing.is_some() {
-            return Err(s.unsupported("meshing", "meshing surfaces into elements is not implemented yet"));
+        let surface_file = m.file.as_deref().is_some_and(|f| {
+            let lower = f.to_ascii_lowercase();
+            lower.ends_with(".obj") || lower.ends_with(".stl")
+        });
+        match (&self.meshing, surface_file) {
+            (None, true) => {
+                return Err(s.invalid(
+                    "mesh.file",
+                    m.file.as_deref().unwrap_or_default(),
+                    "is a surface: add [meshing] with method = \"grid-slice\" (and cell) or \"octree\" (and max_depth)",
+                ))
+            }
+            (Some(_), false) => {
+                return Err(s.invalid("meshing", "…", "applies to a surface mesh.file (.obj or .stl) only"))
+            }
+            (Some(me), true) => match me.method {
+                MeshingMethod::GridSlice => {
+                    let cell = me.cell.unwrap_or(f64::NAN);
+                    if !(cell > 0.0 && cell.is_finite()) {
+                        return Err(s.invalid("meshing.cell", cell, "grid-slice needs a finite cell size > 0 (m)"));
+                    }
+                    if let Some(f) = me.merge_below {
+                        if !(0.0..0.5).contains(&f) {
+                            return Err(s.invalid("meshing.merge_below", f, "must lie in [0, 0.5) (fraction of a cell)"));
+                        }
+                    }
+                }
+                MeshingMethod::Octree => {
+                    let d = me.max_depth.unwrap_or(0);
+                    if !(1..=10).contains(&d) {
+                        return Err(s.invalid("meshing.max_depth", d, "octree needs max_depth in 1..=10"));
+                    }
+                }
+            },
+            (None, false) => {}
         }
         let b = &self.basis;
         if b.family == Family::MeanValue
