@@ -101,7 +101,13 @@ fn octree_bunny_keeps_whole_cells_without_hanging_nodes() {
     let (surface, report) = bunny();
     for depth in [3, 4, 5] {
         let (mesh, r) = octree(&surface, depth).unwrap();
-        println!("depth {depth}: {} elements by depth {:?}, {} dropped, {} nodes", mesh.elements.len(), r.leaves_by_depth, r.dropped, mesh.nodes.len());
+        println!(
+            "depth {depth}: {} elements by depth {:?}, {} dropped, {} nodes",
+            mesh.elements.len(),
+            r.leaves_by_depth,
+            r.dropped,
+            mesh.nodes.len()
+        );
         mesh.validate().unwrap();
         assert_conforming(&mesh);
         // the volume is the kept cubes' volumes
@@ -142,7 +148,8 @@ fn sliced_meshes_pass_the_patch_test_with_harmonic_elements() {
     assert!(err < 1e-9, "{err:e}");
     // mean value elements must be convex and seen from their centroid: the
     // pieces are refused by name
-    let params = cleave::sim::SimulationParams { basis: BasisOptions { health, ..Default::default() }, ..Default::default() };
+    let params =
+        cleave::sim::SimulationParams { basis: BasisOptions { health, ..Default::default() }, ..Default::default() };
     let e = cleave::sim::Simulation::new(mesh, params).err().expect("non-convex pieces");
     assert!(matches!(e, cleave::Error::Basis(_)) && e.to_string().contains("element"), "{e}");
 }

@@ -9,7 +9,8 @@ use super::{IoError, Surface};
 /// [`crate::surface::prepare`].
 pub fn read_stl_surface(path: &Path) -> Result<Surface, IoError> {
     let mut file = std::fs::File::open(path).map_err(|e| IoError::os(path, e))?;
-    let mesh = stl_io::read_stl(&mut file).map_err(|e| IoError::parse(path, 0, format!("not a valid STL file: {e}")))?;
+    let mesh =
+        stl_io::read_stl(&mut file).map_err(|e| IoError::parse(path, 0, format!("not a valid STL file: {e}")))?;
     let vertices: Vec<[f64; 3]> = mesh.vertices.iter().map(|v| [v[0] as f64, v[1] as f64, v[2] as f64]).collect();
     if let Some(i) = vertices.iter().position(|v| !v.iter().all(|x| x.is_finite())) {
         return Err(IoError::unsupported(path, format!("vertex {} has a non-finite coordinate", i + 1)));

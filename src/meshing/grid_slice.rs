@@ -235,6 +235,10 @@ fn clip(
     Ok(out)
 }
 
+/// A grid square: its axis, its plane along that axis, and its cell
+/// indices along the next two axes (cyclically).
+type Square = (usize, i32, i32, i32);
+
 /// A grid line: the free axis and the plane indices of the other two axes
 /// (in increasing axis order).
 type Line = (usize, [i32; 2]);
@@ -348,7 +352,7 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
     };
     let grid_node = |points: &mut Points, ijk: [i32; 3]| points.node(Key { feature: Feature::Grid, planes: ijk });
     // squares as (axis, plane, u, v); regions oriented about +axis
-    let mut squares: HashMap<(usize, i32, i32, i32), Vec<(u32, u32)>> = HashMap::new();
+    let mut squares: HashMap<Square, Vec<(u32, u32)>> = HashMap::new();
     let mut cell_list: Vec<[i32; 3]> = pieces.keys().copied().collect();
     cell_list.sort();
     for cell in &cell_list {
@@ -373,7 +377,7 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             }
         }
     }
-    let mut regions: HashMap<(usize, i32, i32, i32), Vec<Vec<u32>>> = HashMap::new();
+    let mut regions: HashMap<Square, Vec<Vec<u32>>> = HashMap::new();
     let mut square_list: Vec<_> = squares.keys().copied().collect();
     square_list.sort();
     for sq in square_list {
@@ -388,7 +392,12 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             ijk[c] = r;
             ijk
         };
-        let sides = [((u, v), (u + 1, v), b), ((u + 1, v), (u + 1, v + 1), c), ((u + 1, v + 1), (u, v + 1), b), ((u, v + 1), (u, v), c)];
+        let sides = [
+            ((u, v), (u + 1, v), b),
+            ((u + 1, v), (u + 1, v + 1), c),
+            ((u + 1, v + 1), (u, v + 1), b),
+            ((u, v + 1), (u, v), c),
+        ];
         for (from, to, along) in sides {
             let (p0, p1) = (corner(from.0, from.1), corner(to.0, to.1));
             let (id0, x0) = grid_node(&mut points, p0)?;
@@ -399,8 +408,9 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             let mut stops: Vec<(f64, u32)> = vec![(x0[along], id0)];
             let mut w = inside_before(&line, lo);
             let mut status = Vec::new();
-            let between: Vec<Crossing> =
-                crossings.get(&line).map_or(Vec::new(), |l| l.iter().filter(|c| c.0 > lo && c.0 < hi).copied().collect());
+            let between: Vec<Crossing> = crossings
+                .get(&line)
+                .map_or(Vec::new(), |l| l.iter().filter(|c| c.0 > lo && c.0 < hi).copied().collect());
             // inside status of the parts in increasing coordinate
             status.push(w);
             for cr in &between {
@@ -460,7 +470,9 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
                 }
                 let mut ids = [0u32; 8];
                 for (n, (di, dj, dk)) in
-                    [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)].into_iter().enumerate()
+                    [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+                        .into_iter()
+                        .enumerate()
                 {
                     ids[n] = grid_node(&mut points, [i + di, j + dj, k + dk])?.0;
                 }
@@ -546,7 +558,8 @@ fn without_holes(loops: Vec<Vec<u32>>, p: &[[f64; 2]]) -> Result<Vec<Vec<u32>>, 
             .min_by(|&x, &y| signed_area(&outer[x], p).total_cmp(&signed_area(&outer[y], p)))
             .ok_or(Degenerate)?;
         let around = outer.swap_remove(host);
-        let others: Vec<&Vec<u32>> = outer.iter().chain(std::iter::once(&hole)).chain(std::iter::once(&around)).collect();
+        let others: Vec<&Vec<u32>> =
+            outer.iter().chain(std::iter::once(&hole)).chain(std::iter::once(&around)).collect();
         let clear = |a: u32, b: u32, extra: &[(u32, u32)]| {
             let (pa, pb) = (p[a as usize], p[b as usize]);
             others.iter().all(|l| {
@@ -633,13 +646,17 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
         return Err(ParamError::new("meshing.cell", cell, "must be a finite cell size > 0 (m)").into());
     }
     if !(0.0..0.5).contains(&merge_below) {
-        return Err(ParamError::new("meshing.merge_below", merge_below, "must lie in [0, 0.5) (fraction of a cell)").into());
+        return Err(
+            ParamError::new("meshing.merge_below", merge_below, "must lie in [0, 0.5) (fraction of a cell)").into()
+        );
     }
     let lo = [0, 1, 2].map(|a| surface.vertices.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min));
     let hi = [0, 1, 2].map(|a| surface.vertices.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max));
     let cells_needed = (0..3).map(|a| ((hi[a] - lo[a]) / cell).ceil() + 3.0).fold(1.0, |n, c| n * c);
     if !(cells_needed < 2e9) {
-        return Err(ParamError::new("meshing.cell", cell, "gives more than 2e9 grid cells over the surface's box").into());
+        return Err(
+            ParamError::new("meshing.cell", cell, "gives more than 2e9 grid cells over the surface's box").into()
+        );
     }
     // shifts off the surface: irrational fractions of a cell
     let shifts = [0.5 + 0.0137, 0.5 + 0.2917, 0.5 + 0.4141, 0.5 - 0.1733, 0.5 + 0.0771, 0.5 - 0.3819];
@@ -650,7 +667,13 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
         match slice(surface, &grid) {
             Ok(sliced) => {
                 let mut report = SliceReport { shifts: n, cells: cells.map(|c| c as usize), ..Default::default() };
-                let cells = merge_small(sliced.cells, &sliced.volumes, &sliced.positions, merge_below * cell.powi(3), &mut report);
+                let cells = merge_small(
+                    sliced.cells,
+                    &sliced.volumes,
+                    &sliced.positions,
+                    merge_below * cell.powi(3),
+                    &mut report,
+                );
                 report.hexahedra = cells.iter().filter(|c| matches!(c, Cell::Hex(_))).count();
                 report.pieces = cells.len() - report.hexahedra;
                 let mesh = PolyMesh::from_cells(sliced.positions, &cells)?;
@@ -662,7 +685,12 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
             Err(Degenerate) => continue,
         }
     }
-    Err(ParamError::new("meshing.cell", cell, "meets the surface degenerately on every grid shift tried; change it slightly").into())
+    Err(ParamError::new(
+        "meshing.cell",
+        cell,
+        "meets the surface degenerately on every grid shift tried; change it slightly",
+    )
+    .into())
 }
 
 /// Merges every cell smaller than `min_volume` (m^3) into the face
@@ -714,11 +742,8 @@ fn merge_small(
         let Some((n, _)) = best else { continue };
         let mine = faces[e].take().unwrap_or_default();
         let theirs = faces[n].take().unwrap_or_default();
-        let shared: std::collections::HashSet<Vec<u32>> = mine
-            .iter()
-            .map(|f| face_key(f))
-            .filter(|k| theirs.iter().any(|g| face_key(g) == *k))
-            .collect();
+        let shared: std::collections::HashSet<Vec<u32>> =
+            mine.iter().map(|f| face_key(f)).filter(|k| theirs.iter().any(|g| face_key(g) == *k)).collect();
         let union: Vec<Vec<u32>> = theirs.into_iter().chain(mine).filter(|f| !shared.contains(&face_key(f))).collect();
         for f in &union {
             let users = owners.get_mut(&face_key(f)).expect("face of a cell");

@@ -121,7 +121,8 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
         }
         let u = units(o.depth + 1);
         for k in 0..8i64 {
-            let corner = [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)];
+            let corner =
+                [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)];
             stack.push((Octant { depth: o.depth + 1, corner }, met.clone()));
         }
     }
@@ -131,7 +132,9 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
         if p.iter().any(|&x| x < 0 || x >= n) {
             return None;
         }
-        (0..=d).map(|depth| Octant { depth, corner: p.map(|x| x - x.rem_euclid(units(depth))) }).find(|o| leaves.contains_key(o))
+        (0..=d)
+            .map(|depth| Octant { depth, corner: p.map(|x| x - x.rem_euclid(units(depth))) })
+            .find(|o| leaves.contains_key(o))
     };
     // 2:1 balance across faces
     loop {
@@ -166,11 +169,15 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
             let Some(crossed) = leaves.remove(&o) else { continue };
             let u = units(o.depth + 1);
             for k in 0..8i64 {
-                let corner = [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)];
+                let corner =
+                    [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)];
                 let child = Octant { depth: o.depth + 1, corner };
                 let (centre, half) = box_of(&child);
                 let meets = crossed
-                    && surface.triangles.iter().any(|t| triangle_meets_box(t.map(|v| surface.vertices[v as usize]), centre, half));
+                    && surface
+                        .triangles
+                        .iter()
+                        .any(|t| triangle_meets_box(t.map(|v| surface.vertices[v as usize]), centre, half));
                 leaves.insert(child, meets);
             }
         }
@@ -179,11 +186,8 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
     let mut sorted: Vec<(Octant, bool)> = leaves.iter().map(|(o, c)| (*o, *c)).collect();
     sorted.sort();
     let mut report = OctreeReport { leaves_by_depth: vec![0; d as usize + 1], ..Default::default() };
-    let kept: Vec<Octant> = sorted
-        .iter()
-        .filter(|(o, crossed)| *crossed || inside(surface, &all, box_of(o).0))
-        .map(|(o, _)| *o)
-        .collect();
+    let kept: Vec<Octant> =
+        sorted.iter().filter(|(o, crossed)| *crossed || inside(surface, &all, box_of(o).0)).map(|(o, _)| *o).collect();
     report.crossing = sorted.iter().filter(|(_, c)| *c).count();
     report.dropped = sorted.len() - kept.len();
     let kept_set: HashSet<Octant> = kept.iter().copied().collect();
@@ -218,7 +222,10 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
     for o in &kept {
         let u = units(o.depth);
         for k in 0..8i64 {
-            add([o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)], &mut node_ids);
+            add(
+                [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)],
+                &mut node_ids,
+            );
         }
         let mut sides = [false; 6];
         for a in 0..3 {

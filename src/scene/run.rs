@@ -8,9 +8,9 @@ use super::{BoxElement, Generator, LoadedScene, MeshingMethod, Mode, SceneError}
 use crate::io::{read_mesh, read_surface};
 use crate::mesh::PolyMesh;
 use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, grid_slice, octree, prism, random_convex};
-use crate::surface::prepare;
 use crate::output::{write_frame, write_summary, DgSummary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{EmbeddedSurface, Located, Simulation};
+use crate::surface::prepare;
 use crate::topology::merge_slivers;
 use crate::Error;
 
@@ -162,6 +162,19 @@ impl<E: Into<Error>> From<E> for Failure {
     }
 }
 
+/// Refinement passes of a static scene at most (each pass refines every
+/// element over its threshold once).
+const MAX_REFINE_PASSES: usize = 8;
+
+/// Runs every refinement rule once; returns how many elements were split.
+fn refine(sim: &mut Simulation, rules: &[super::RefineSpec]) -> Result<usize, Error> {
+    let mut refined = 0;
+    for r in rules {
+        refined += sim.refine_by_stress(&r.rule())?.refined;
+    }
+    Ok(refined)
+}
+
 fn run(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Failure> {
     let started = Instant::now();
     let dir = scene.output_dir(opts);
@@ -191,6 +204,14 @@ fn run(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Failure> {
         Mode::Static => {
             stats.push(sim.solve_static()?);
             write(&mut sim, 0)?;
+            // refinement: solve again on the refined mesh until no element
+            // is over its threshold (or every such one is at its level)
+            let mut passes = 0;
+            while passes < MAX_REFINE_PASSES && refine(&mut sim, &s.refine)? > 0 {
+                passes += 1;
+                stats.push(sim.solve_static()?);
+                write(&mut sim, passes)?;
+            }
             1
         }
         Mode::Dynamic => {
@@ -214,6 +235,7 @@ fn run(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Failure> {
                     }
                 }
                 stats.push(sim.step()?.solve);
+                refine(&mut sim, &s.refine)?;
                 if step % s.output.every == 0 {
                     write(&mut sim, step / s.output.every)?;
                 }

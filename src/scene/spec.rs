@@ -412,16 +412,52 @@ pub struct CutSpec {
     pub plane: Option<PlaneSpec>,
 }
 
-/// `[[refine]]`.
+/// `[[refine]]`: split elements whose stress is high (see
+/// [`crate::sim::RefineRule`]).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct RefineSpec {
-    /// Refinement criterion (`"stress"`).
-    pub criterion: String,
-    /// Threshold (Pa for stress).
+    /// Refinement criterion.
+    pub criterion: RefineCriterion,
+    /// Largest absolute principal stress an element may carry (Pa).
     pub threshold: f64,
-    /// `"1-to-2"` or `"1-to-8"`.
-    pub split: String,
+    /// `"1-to-2"` (across the principal direction) or `"1-to-8"` (octants).
+    pub split: RefineSplitName,
+    /// How many times an element may be refined (default 3).
+    pub max_level: Option<u8>,
+}
+
+/// Refinement criteria.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum RefineCriterion {
+    /// The largest absolute principal stress.
+    Stress,
+}
+
+/// Refinement splits, by their scene names.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+pub enum RefineSplitName {
+    /// In two.
+    #[serde(rename = "1-to-2")]
+    Halves,
+    /// In eight.
+    #[serde(rename = "1-to-8")]
+    Octants,
+}
+
+impl RefineSpec {
+    /// The engine's rule.
+    pub fn rule(&self) -> crate::sim::RefineRule {
+        crate::sim::RefineRule {
+            threshold: self.threshold,
+            split: match self.split {
+                RefineSplitName::Halves => crate::sim::RefineSplit::Halves,
+                RefineSplitName::Octants => crate::sim::RefineSplit::Octants,
+            },
+            max_level: self.max_level.unwrap_or(3),
+        }
+    }
 }
 
 /// `[output]`.
@@ -580,7 +616,11 @@ impl Scene {
                     }
                     if let Some(f) = me.merge_below {
                         if !(0.0..0.5).contains(&f) {
-                            return Err(s.invalid("meshing.merge_below", f, "must lie in [0, 0.5) (fraction of a cell)"));
+                            return Err(s.invalid(
+                                "meshing.merge_below",
+                                f,
+                                "must lie in [0, 0.5) (fraction of a cell)",
+                            ));
                         }
                     }
                 }
@@ -646,8 +686,13 @@ impl Scene {
                 return Err(s.invalid(&format!("cut.{i}.step"), c.step, "cuts need mode = \"dynamic\""));
             }
         }
-        if !self.refine.is_empty() {
-            return Err(s.unsupported("refine", "refinement is not implemented yet"));
+        for r in &self.refine {
+            if let Err(e) = r.rule().check() {
+                return Err(s.invalid(e.name, &e.value, &e.allowed));
+            }
+            if self.basis.family == Family::Dg {
+                return Err(s.invalid("refine", "dg", "refinement applies to the mean value and harmonic families"));
+            }
         }
         if self.output.every == 0 {
             return Err(s.invalid("output.every", 0, "must be at least 1"));

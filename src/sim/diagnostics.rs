@@ -20,13 +20,20 @@ pub struct Located {
 }
 
 impl Simulation {
-    /// Von Mises stress of every element (Pa): of the corotated mean strain
-    /// `sym(Rᵀ F) - I`, with each element's rotation extracted at the
-    /// current positions (the identity when not corotated).
+    /// Von Mises stress of every element (Pa), of
+    /// [`Simulation::element_stresses`].
     pub fn von_mises(&self) -> Vec<f64> {
+        self.element_stresses().into_iter().map(von_mises).collect()
+    }
+
+    /// Stress of every element (Pa, Voigt `[xx, yy, zz, xy, xz, yz]`, rest
+    /// frame): of the corotated mean strain `sym(Rᵀ F) - I`, with each
+    /// element's rotation extracted at the current positions (the identity
+    /// when not corotated).
+    pub fn element_stresses(&self) -> Vec<[f64; 6]> {
         let (l, m) = self.params.material.lame();
         let (x, store, corotation) = (&self.state.position, self.elements.store(), self.elements.corotation());
-        let mut out = vec![0.0; self.mesh.elements.len()];
+        let mut out = vec![[0.0; 6]; self.mesh.elements.len()];
         for (bi, b) in store.batches.iter().enumerate() {
             for i in 0..b.len() {
                 let r = corotation.rotation_at(store, bi, i, x, self.params.corotated);
@@ -35,7 +42,7 @@ impl Simulation {
                 let g: [[f64; 3]; 3] = std::array::from_fn(|p| {
                     std::array::from_fn(|q| r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q] - f64::from(p == q))
                 });
-                out[b.elements[i] as usize] = von_mises(stress(g, l, m));
+                out[b.elements[i] as usize] = stress(g, l, m);
             }
         }
         out

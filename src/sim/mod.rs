@@ -27,6 +27,7 @@ pub mod embedding;
 mod params;
 mod points;
 mod rebuild;
+mod refine;
 mod state;
 mod statics;
 mod step;
@@ -40,6 +41,7 @@ pub use discretization::{Discretization, Model, NodalElements};
 pub use embedding::EmbeddedSurface;
 pub use params::{SimulationParams, CUT_ATTEMPTS};
 pub use points::PointMap;
+pub use refine::{principal, RefineReport, RefineRule, RefineSplit};
 pub use step::StepStats;
 pub use timings::{Phase, PhaseTimings};
 
@@ -107,6 +109,9 @@ pub struct Simulation {
     cut_retries: usize,
     /// Faces a DG cut integrated again (the others kept their moments).
     faces_integrated: usize,
+    /// How many times each element's ancestors were refined (elements a
+    /// cut adds start at 0).
+    refine_levels: Vec<u8>,
     timings: PhaseTimings,
 }
 
@@ -181,6 +186,7 @@ impl Simulation {
             steps: 0,
             cut_retries: 0,
             faces_integrated: 0,
+            refine_levels: Vec::new(),
             timings,
         };
         sim.refresh_dg()?;

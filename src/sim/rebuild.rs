@@ -103,7 +103,7 @@ impl Simulation {
     /// changed, and brings the rotations (untouched elements keep theirs,
     /// new ones get theirs), the solvers and the boundary surface up to
     /// date. Nothing but the mesh has changed when it fails.
-    fn apply_cut(&mut self, report: &PolygonCutReport) -> Result<(), Error> {
+    pub(super) fn apply_cut(&mut self, report: &PolygonCutReport) -> Result<(), Error> {
         let (mesh, cut) = (&self.mesh, &report.cut);
         let touched = &cut.touched;
         // only the touched elements changed (the two sides of a cut carry

@@ -69,7 +69,8 @@ pub(super) fn first_crossing(vertices: &[[f64; 3]], triangles: &[[u32; 3]]) -> O
             }
         }
     }
-    let overlap = |x: &([f64; 3], [f64; 3]), y: &([f64; 3], [f64; 3])| (0..3).all(|k| x.0[k] <= y.1[k] && y.0[k] <= x.1[k]);
+    let overlap =
+        |x: &([f64; 3], [f64; 3]), y: &([f64; 3], [f64; 3])| (0..3).all(|k| x.0[k] <= y.1[k] && y.0[k] <= x.1[k]);
     for (t, bx) in boxes.iter().enumerate() {
         let (a, b) = range(bx);
         let mut best: Option<usize> = None;

@@ -107,7 +107,10 @@ pub fn prepare(surface: &Surface) -> Result<(Surface, SurfaceReport), SurfaceErr
     let mut triangles: Vec<[u32; 3]> = surface.triangles.iter().map(|t| t.map(|v| remap[v as usize])).collect();
     for (t, tri) in triangles.iter().enumerate() {
         let p = tri.map(|v| vertices[v as usize]);
-        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] || norm(cross(sub(p[1], p[0]), sub(p[2], p[0]))) == 0.0
+        if tri[0] == tri[1]
+            || tri[1] == tri[2]
+            || tri[0] == tri[2]
+            || norm(cross(sub(p[1], p[0]), sub(p[2], p[0]))) == 0.0
         {
             return Err(SurfaceError::Degenerate { triangle: t + 1 });
         }
@@ -173,7 +176,9 @@ fn merge_duplicates(vertices: &[[f64; 3]], triangles: &[[u32; 3]]) -> (Vec<[f64;
 /// For every triangle and each of its edges `(t[i], t[i+1])`, the other
 /// triangle on that edge; an error for an edge with one or more than two.
 fn edge_neighbours(triangles: &[[u32; 3]]) -> Result<Vec<[u32; 3]>, SurfaceError> {
-    let mut edges: HashMap<(u32, u32), Vec<(u32, u8)>> = HashMap::with_capacity(triangles.len() * 3 / 2);
+    // the triangles on each edge, with the edge's place in each
+    type Users = Vec<(u32, u8)>;
+    let mut edges: HashMap<(u32, u32), Users> = HashMap::with_capacity(triangles.len() * 3 / 2);
     for (t, tri) in triangles.iter().enumerate() {
         for i in 0..3 {
             let (a, b) = (tri[i], tri[(i + 1) % 3]);
@@ -182,9 +187,9 @@ fn edge_neighbours(triangles: &[[u32; 3]]) -> Result<Vec<[u32; 3]>, SurfaceError
     }
     let mut out = vec![[u32::MAX; 3]; triangles.len()];
     // report the edge of the lowest triangle first, whatever the hash order
-    let mut sorted: Vec<(&(u32, u32), &Vec<(u32, u8)>)> = edges.iter().collect();
-    sorted.sort_by_key(|(e, users)| (users[0].0, **e));
-    for (&(a, b), users) in sorted {
+    let mut sorted: Vec<((u32, u32), Users)> = edges.into_iter().collect();
+    sorted.sort_by_key(|(e, users)| (users[0].0, *e));
+    for ((a, b), users) in sorted {
         let (a1, b1, triangle) = (a as usize + 1, b as usize + 1, users[0].0 as usize + 1);
         match users.len() {
             1 => return Err(SurfaceError::Open { a: a1, b: b1, triangle }),
@@ -265,12 +270,13 @@ fn orient(
             let tri = if flip[t] { [triangles[t][0], triangles[t][2], triangles[t][1]] } else { triangles[t] };
             for i in 0..3 {
                 let (a, b) = (tri[i], tri[(i + 1) % 3]);
-                let s = neighbours[t][(0..3).find(|&j| {
-                    let o = triangles[t];
-                    let (x, y) = (o[j], o[(j + 1) % 3]);
-                    (x == a && y == b) || (x == b && y == a)
-                })
-                .expect("edge of its own triangle")] as usize;
+                let s = neighbours[t][(0..3)
+                    .find(|&j| {
+                        let o = triangles[t];
+                        let (x, y) = (o[j], o[(j + 1) % 3]);
+                        (x == a && y == b) || (x == b && y == a)
+                    })
+                    .expect("edge of its own triangle")] as usize;
                 let need = !runs(triangles[s], false, b, a);
                 if component[s] == u32::MAX {
                     component[s] = components;
@@ -406,10 +412,25 @@ mod tests {
     fn the_projective_plane_is_not_orientable() {
         // the six-vertex triangulation of the real projective plane: closed
         // and manifold, but no orientation makes neighbours agree
-        let vertices = vec![[0.0, 0.0, 0.0], [1.0, 0.1, 0.3], [0.2, 1.0, 0.7], [-0.9, 0.4, 0.1], [0.3, -1.0, 0.5], [0.1, 0.2, 1.0]];
+        let vertices = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.1, 0.3],
+            [0.2, 1.0, 0.7],
+            [-0.9, 0.4, 0.1],
+            [0.3, -1.0, 0.5],
+            [0.1, 0.2, 1.0],
+        ];
         let triangles = vec![
-            [0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [0, 5, 1],
-            [1, 2, 4], [2, 3, 5], [3, 4, 1], [4, 5, 2], [5, 1, 3],
+            [0, 1, 2],
+            [0, 2, 3],
+            [0, 3, 4],
+            [0, 4, 5],
+            [0, 5, 1],
+            [1, 2, 4],
+            [2, 3, 5],
+            [3, 4, 1],
+            [4, 5, 2],
+            [5, 1, 3],
         ];
         let e = prepare(&Surface { vertices, triangles }).unwrap_err();
         assert!(matches!(e, SurfaceError::NonOrientable { .. }), "{e}");

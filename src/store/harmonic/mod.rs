@@ -150,7 +150,14 @@ const SLICE_LEVELS: usize = 3;
 /// Adds the cone rules of the pieces of the closed surface `surface` cut
 /// by a grid of cell `cell` (m), slicing again where a piece has no star
 /// point; false where that fails `levels` deep.
-fn sliced_rule(surface: &crate::io::Surface, cell: f64, order: usize, levels: usize, points: &mut Vec<[f64; 3]>, weights: &mut Vec<f64>) -> bool {
+fn sliced_rule(
+    surface: &crate::io::Surface,
+    cell: f64,
+    order: usize,
+    levels: usize,
+    points: &mut Vec<[f64; 3]>,
+    weights: &mut Vec<f64>,
+) -> bool {
     let Ok((pieces, _)) = crate::meshing::grid_slice(surface, cell, 0.0) else { return false };
     (0..pieces.elements.len()).all(|e| {
         let verts: Vec<[f64; 3]> = pieces.elements[e].nodes.iter().map(|&v| pieces.nodes[v as usize]).collect();
@@ -166,7 +173,14 @@ fn sliced_rule(surface: &crate::io::Surface, cell: f64, order: usize, levels: us
             }
             None => {
                 levels > 0
-                    && sliced_rule(&crate::io::Surface { vertices: verts, triangles }, 0.5 * cell, order, levels - 1, points, weights)
+                    && sliced_rule(
+                        &crate::io::Surface { vertices: verts, triangles },
+                        0.5 * cell,
+                        order,
+                        levels - 1,
+                        points,
+                        weights,
+                    )
             }
         }
     })
@@ -175,7 +189,12 @@ fn sliced_rule(surface: &crate::io::Surface, cell: f64, order: usize, levels: us
 /// The quadrature rule of an element from its vertices and outward
 /// triangles (see the module docs); `None` if no slicing gives pieces with
 /// star points.
-pub fn element_rule(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64, order: usize) -> Option<(Vec<[f64; 3]>, Vec<f64>)> {
+pub fn element_rule(
+    verts: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    diameter: f64,
+    order: usize,
+) -> Option<(Vec<[f64; 3]>, Vec<f64>)> {
     let (mut points, mut weights) = (Vec::new(), Vec::new());
     match star_point(verts, triangles, diameter) {
         Some(apex) => cone_rule(verts, triangles, apex, order, &mut points, &mut weights),
