@@ -15,6 +15,15 @@ pub struct Surface {
     pub triangles: Vec<[u32; 3]>,
 }
 
+impl Surface {
+    /// Axis-aligned bounding box `(min, max)` of the vertices (m).
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        let lo = [0, 1, 2].map(|a| self.vertices.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min));
+        let hi = [0, 1, 2].map(|a| self.vertices.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max));
+        (lo, hi)
+    }
+}
+
 /// Reads an OBJ surface (polygons are triangulated; groups are merged).
 pub fn read_obj_surface(path: &Path) -> Result<Surface, IoError> {
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };

@@ -650,8 +650,7 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
             ParamError::new("meshing.merge_below", merge_below, "must lie in [0, 0.5) (fraction of a cell)").into()
         );
     }
-    let lo = [0, 1, 2].map(|a| surface.vertices.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min));
-    let hi = [0, 1, 2].map(|a| surface.vertices.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max));
+    let (lo, hi) = surface.bounding_box();
     let cells_needed = (0..3).map(|a| ((hi[a] - lo[a]) / cell).ceil() + 3.0).fold(1.0, |n, c| n * c);
     if !(cells_needed < 2e9) {
         return Err(

@@ -89,8 +89,7 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
         return Err(ParamError::new("meshing.max_depth", max_depth, "must lie in 1..=10").into());
     }
     let d = max_depth as u32;
-    let lo = [0, 1, 2].map(|a| surface.vertices.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min));
-    let hi = [0, 1, 2].map(|a| surface.vertices.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max));
+    let (lo, hi) = surface.bounding_box();
     let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
     // a root cube a little larger than the box, shifted off the surface
     let size = extent * 1.0731;
