@@ -82,6 +82,21 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
         }
         offsets.push(conn.len() as i64);
     }
+    let polyhedra = (!all_tets).then_some((&faces[..], &faceoffsets[..]));
+    write_cells(path, points, Cells { conn: &conn, offsets: &offsets, types: &types, polyhedra }, fields)
+}
+
+/// The cells of an unstructured grid: connectivity, offsets, VTK types,
+/// and for polyhedra their face streams.
+struct Cells<'a> {
+    conn: &'a [i64],
+    offsets: &'a [i64],
+    types: &'a [u8],
+    polyhedra: Option<(&'a [i64], &'a [i64])>,
+}
+
+/// Writes an unstructured grid of `cells` over `points` with `fields`.
+fn write_cells(path: &Path, points: &[[f64; 3]], cells: Cells, fields: &VtuFields) -> Result<(), IoError> {
     let flat: Vec<f64> = points.iter().flatten().copied().collect();
     let mut s = String::new();
     s.push_str("<?xml version=\"1.0\"?>\n");
@@ -89,7 +104,7 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
         "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n",
     );
     s.push_str("  <UnstructuredGrid>\n");
-    let _ = writeln!(s, "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">", points.len(), mesh.elements.len());
+    let _ = writeln!(s, "    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">", points.len(), cells.types.len());
     s.push_str("      <PointData>\n");
     for (name, v) in &fields.point_vectors {
         let flat: Vec<f64> = v.iter().flatten().copied().collect();
@@ -105,15 +120,30 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
     s.push_str("      </CellData>\n      <Points>\n");
     data_array(&mut s, "Float64", "Points", 3, b64(&flat));
     s.push_str("      </Points>\n      <Cells>\n");
-    data_array(&mut s, "Int64", "connectivity", 1, b64(&conn));
-    data_array(&mut s, "Int64", "offsets", 1, b64(&offsets));
-    data_array(&mut s, "UInt8", "types", 1, b64(&types));
-    if !all_tets {
-        data_array(&mut s, "Int64", "faces", 1, b64(&faces));
-        data_array(&mut s, "Int64", "faceoffsets", 1, b64(&faceoffsets));
+    data_array(&mut s, "Int64", "connectivity", 1, b64(cells.conn));
+    data_array(&mut s, "Int64", "offsets", 1, b64(cells.offsets));
+    data_array(&mut s, "UInt8", "types", 1, b64(cells.types));
+    if let Some((faces, faceoffsets)) = cells.polyhedra {
+        data_array(&mut s, "Int64", "faces", 1, b64(faces));
+        data_array(&mut s, "Int64", "faceoffsets", 1, b64(faceoffsets));
     }
     s.push_str("      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
     write_text(path, &s)
+}
+
+/// Writes a triangle surface (VTK triangles) over `vertices` (m) with
+/// per-vertex 3-vectors `point_vectors` (name, values).
+pub fn write_surface_vtu(
+    path: &Path,
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    point_vectors: &[(&str, &[[f64; 3]])],
+) -> Result<(), IoError> {
+    let conn: Vec<i64> = triangles.iter().flatten().map(|&v| v as i64).collect();
+    let offsets: Vec<i64> = (1..=triangles.len() as i64).map(|t| 3 * t).collect();
+    let types = vec![5u8; triangles.len()];
+    let fields = VtuFields { point_vectors: point_vectors.to_vec(), ..Default::default() };
+    write_cells(path, vertices, Cells { conn: &conn, offsets: &offsets, types: &types, polyhedra: None }, &fields)
 }
 
 /// One `<DataArray>` as read: its attributes and decoded numbers.

@@ -21,9 +21,17 @@ pub use geometry::{face_geometry, fold_depth, FaceGeometry, Plane};
 pub use triangulate::triangulate_loop;
 pub use validate::{MeshError, ValidationOptions};
 
-use std::collections::HashMap;
+use rayon::prelude::*;
 
 use cleave_kernels::vec3::{add, scale, sub};
+
+/// The sorted, distinct nodes of the faces `refs`.
+fn nodes_of(faces: &[Face], refs: &[FaceRef]) -> Vec<u32> {
+    let mut nodes: Vec<u32> = refs.iter().flat_map(|r| faces[r.face as usize].vertices.iter().copied()).collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
+}
 
 /// A global face: a vertex loop and its triangulation.
 #[derive(Clone, Debug, PartialEq)]
@@ -162,7 +170,7 @@ impl PolyMesh {
             return Err(MeshError::NonFiniteNode { node, position: nodes[node] });
         }
         let mut mesh = PolyMesh { nodes, faces: Vec::new(), elements: Vec::with_capacity(cells.len()) };
-        let mut by_key: HashMap<Vec<u32>, u32> = HashMap::new();
+        let mut by_key: rustc_hash::FxHashMap<Vec<u32>, u32> = Default::default();
         let mut users: Vec<u8> = Vec::new();
         for (e, cell) in cells.iter().enumerate() {
             let loops = cell.face_loops();
@@ -196,9 +204,8 @@ impl PolyMesh {
             }
             mesh.elements.push(Element { faces: refs, nodes: Vec::new() });
         }
-        for e in 0..mesh.elements.len() {
-            mesh.refresh_element_nodes(e);
-        }
+        let faces = &mesh.faces;
+        mesh.elements.par_iter_mut().for_each(|el| el.nodes = nodes_of(faces, &el.faces));
         mesh.triangulate_all();
         mesh.orient()?;
         Ok(mesh)
@@ -216,18 +223,13 @@ impl PolyMesh {
 
     /// Recomputes the sorted node list of element `e` from its faces.
     pub(crate) fn refresh_element_nodes(&mut self, e: usize) {
-        let mut nodes: Vec<u32> =
-            self.elements[e].faces.iter().flat_map(|r| self.faces[r.face as usize].vertices.iter().copied()).collect();
-        nodes.sort_unstable();
-        nodes.dedup();
-        self.elements[e].nodes = nodes;
+        self.elements[e].nodes = nodes_of(&self.faces, &self.elements[e].faces);
     }
 
     /// (Re)computes the triangulation of every face.
     pub(crate) fn triangulate_all(&mut self) {
-        for f in 0..self.faces.len() {
-            self.triangulate_face(f);
-        }
+        let nodes = &self.nodes;
+        self.faces.par_iter_mut().for_each(|f| f.triangles = triangulate_loop(nodes, &f.vertices));
     }
 
     /// (Re)computes the triangulation of face `f` from its loop.

@@ -2,7 +2,7 @@
 //! duplicate nodes. Checks that find what to repair are in
 //! [`super::validate`].
 
-use std::collections::HashMap;
+use rayon::prelude::*;
 
 use super::{Cell, MeshError, PolyMesh};
 
@@ -12,8 +12,14 @@ impl PolyMesh {
     /// Fails when an element is not closed or encloses no volume, or when
     /// two elements overlap across a face.
     pub fn orient(&mut self) -> Result<(), MeshError> {
-        for e in 0..self.elements.len() {
-            self.orient_element(e)?;
+        // each element's orientation alone (in parallel), the first error
+        // in element order
+        let flags: Vec<Result<Vec<bool>, MeshError>> =
+            (0..self.elements.len()).into_par_iter().map(|e| self.element_orientation(e)).collect();
+        for (e, f) in flags.into_iter().enumerate() {
+            for (r, outward) in self.elements[e].faces.iter_mut().zip(f?) {
+                r.outward = outward;
+            }
         }
         let mut owner: Vec<Option<(usize, bool)>> = vec![None; self.faces.len()];
         for (e, el) in self.elements.iter().enumerate() {
@@ -30,75 +36,77 @@ impl PolyMesh {
         Ok(())
     }
 
-    fn orient_element(&mut self, e: usize) -> Result<(), MeshError> {
-        let refs = self.elements[e].faces.clone();
-        // edge -> faces (local indices) that contain it
-        let mut edge_faces: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    /// The outward flag of each face reference of element `e` that makes
+    /// its faces agree along shared edges and its volume positive.
+    fn element_orientation(&self, e: usize) -> Result<Vec<bool>, MeshError> {
+        let refs = &self.elements[e].faces;
+        // every edge of every face: (edge, face, whether the loop runs it
+        // from the lower id to the higher), sorted by edge
+        let mut uses: Vec<((u32, u32), u32, bool)> = Vec::new();
         for (k, r) in refs.iter().enumerate() {
             let v = &self.faces[r.face as usize].vertices;
             for i in 0..v.len() {
                 let (a, b) = (v[i], v[(i + 1) % v.len()]);
-                edge_faces.entry((a.min(b), a.max(b))).or_default().push(k);
+                uses.push(((a.min(b), a.max(b)), k as u32, a < b));
             }
         }
-        let mut sorted: Vec<_> = edge_faces.iter().collect();
-        sorted.sort_unstable_by_key(|(k, _)| **k);
-        for (edge, fs) in &sorted {
-            if fs.len() != 2 {
-                return Err(MeshError::OpenElement { element: e, edge: **edge, count: fs.len() });
+        uses.sort_unstable();
+        // each edge has exactly two faces; neighbours[k]: (other face, whether
+        // both loops run the shared edge the same way)
+        let mut neighbours: Vec<Vec<(u32, bool)>> = vec![Vec::new(); refs.len()];
+        for group in uses.chunk_by(|x, y| x.0 == y.0) {
+            if group.len() != 2 {
+                return Err(MeshError::OpenElement { element: e, edge: group[0].0, count: group.len() });
             }
+            let (x, y) = (group[0], group[1]);
+            neighbours[x.1 as usize].push((y.1, x.2 == y.2));
+            neighbours[y.1 as usize].push((x.1, x.2 == y.2));
         }
         // Breadth-first flip propagation: neighbours must traverse the shared
-        // edge in opposite directions.
-        let dir = |mesh: &PolyMesh, k: usize, flip: bool, a: u32, b: u32| -> bool {
-            let v = &mesh.faces[refs[k].face as usize].vertices;
-            let n = v.len();
-            let i = v.iter().position(|&x| x == a).expect("edge vertex in loop");
-            let forward = v[(i + 1) % n] == b;
-            forward != flip
-        };
+        // edge in opposite directions, so one running it the same way flips
         let mut flip: Vec<Option<bool>> = vec![None; refs.len()];
         flip[0] = Some(!refs[0].outward);
         let mut queue = vec![0usize];
         while let Some(k) = queue.pop() {
-            let v = self.faces[refs[k].face as usize].vertices.clone();
-            for i in 0..v.len() {
-                let (a, b) = (v[i], v[(i + 1) % v.len()]);
-                for &other in &edge_faces[&(a.min(b), a.max(b))] {
-                    if other == k {
-                        continue;
+            let mine = flip[k].unwrap_or(false);
+            for &(other, same) in &neighbours[k] {
+                let want = mine != same;
+                match flip[other as usize] {
+                    None => {
+                        flip[other as usize] = Some(want);
+                        queue.push(other as usize);
                     }
-                    let mine = dir(self, k, flip[k].unwrap(), a, b);
-                    let want_flip_other = {
-                        let theirs_unflipped = dir(self, other, false, a, b);
-                        theirs_unflipped == mine
-                    };
-                    match flip[other] {
-                        None => {
-                            flip[other] = Some(want_flip_other);
-                            queue.push(other);
-                        }
-                        Some(f) if f != want_flip_other => {
-                            return Err(MeshError::InconsistentOrientation { element: e, edge: (a.min(b), a.max(b)) });
-                        }
-                        _ => {}
+                    Some(f) if f != want => {
+                        let shared = uses
+                            .chunk_by(|x, y| x.0 == y.0)
+                            .find(|g| g.iter().any(|u| u.1 as usize == k) && g.iter().any(|u| u.1 == other))
+                            .map_or((0, 0), |g| g[0].0);
+                        return Err(MeshError::InconsistentOrientation { element: e, edge: shared });
                     }
+                    _ => {}
                 }
             }
         }
-        for (k, r) in self.elements[e].faces.iter_mut().enumerate() {
-            // flip[k] == true means the loop runs against the element's chosen orientation
-            r.outward = !flip[k].unwrap_or(false);
-        }
-        let v = self.element_volume(e);
+        // flip[k] == true means the loop runs against the element's chosen orientation
+        let mut outward: Vec<bool> = (0..refs.len()).map(|k| !flip[k].unwrap_or(false)).collect();
+        // the element's volume with these flags, as `element_volume` sums it
+        let origin = self.nodes[self.elements[e].nodes[0] as usize];
+        let v: f64 = refs
+            .iter()
+            .zip(&outward)
+            .flat_map(|(r, &out)| self.faces[r.face as usize].triangles.iter().map(move |t| (t, out)))
+            .map(|(t, out)| {
+                let p = t.map(|i| self.nodes[i as usize]);
+                let (b, c) = if out { (p[1], p[2]) } else { (p[2], p[1]) };
+                cleave_kernels::tet::signed_volume(origin, p[0], b, c)
+            })
+            .sum();
         if v < 0.0 {
-            for r in self.elements[e].faces.iter_mut() {
-                r.outward = !r.outward;
-            }
+            outward.iter_mut().for_each(|o| *o = !*o);
         } else if v == 0.0 || v.is_nan() {
             return Err(MeshError::NonPositiveVolume { element: e, volume: v });
         }
-        Ok(())
+        Ok(outward)
     }
 
     /// Merges nodes closer than `rel_tol` times the bounding box diagonal into

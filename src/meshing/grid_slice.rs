@@ -23,7 +23,7 @@
 //! solid (the sign of the triangle normal along the line), so the status of
 //! every piece of a line is exact and agrees with the clipped triangles.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use cleave_kernels::vec3::{cross, dot, sub};
 
@@ -284,10 +284,11 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             cross(sub(p[1], p[0]), sub(p[2], p[0]))
         })
         .collect();
-    let mut points = Points { surface, normals, grid, ids: HashMap::new(), keys: Vec::new(), positions: Vec::new() };
+    let mut points =
+        Points { surface, normals, grid, ids: HashMap::default(), keys: Vec::new(), positions: Vec::new() };
     // 1. the surface triangles clipped to the cells
-    let mut pieces: HashMap<[i32; 3], Vec<Vec<u32>>> = HashMap::new();
-    let mut crossings: HashMap<Line, Vec<Crossing>> = HashMap::new();
+    let mut pieces: HashMap<[i32; 3], Vec<Vec<u32>>> = HashMap::default();
+    let mut crossings: HashMap<Line, Vec<Crossing>> = HashMap::default();
     let cell_of = |x: f64, a: usize| ((x - grid.origin[a]) / grid.h).floor() as i32;
     for (t, tri) in surface.triangles.iter().enumerate() {
         let t32 = t as u32;
@@ -352,7 +353,7 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
     };
     let grid_node = |points: &mut Points, ijk: [i32; 3]| points.node(Key { feature: Feature::Grid, planes: ijk });
     // squares as (axis, plane, u, v); regions oriented about +axis
-    let mut squares: HashMap<Square, Vec<(u32, u32)>> = HashMap::new();
+    let mut squares: HashMap<Square, Vec<(u32, u32)>> = HashMap::default();
     let mut cell_list: Vec<[i32; 3]> = pieces.keys().copied().collect();
     cell_list.sort();
     for cell in &cell_list {
@@ -377,7 +378,7 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             }
         }
     }
-    let mut regions: HashMap<Square, Vec<Vec<u32>>> = HashMap::new();
+    let mut regions: HashMap<Square, Vec<Vec<u32>>> = HashMap::default();
     let mut square_list: Vec<_> = squares.keys().copied().collect();
     square_list.sort();
     for sq in square_list {
@@ -432,8 +433,12 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             }
         }
         let loops = chain_loops(&edges)?;
-        let plane_2d: Vec<[f64; 2]> = points.positions.iter().map(|p| [p[b], p[c]]).collect();
-        regions.insert(sq, without_holes(loops, &plane_2d)?);
+        let loops = if loops.len() > 1 {
+            without_holes(loops, &Plane2d { positions: &points.positions, b, c })?
+        } else {
+            loops
+        };
+        regions.insert(sq, loops);
     }
     // 3. the pieces of every cell: connected sets of its polygons
     let mut cells_out = Vec::new();
@@ -487,7 +492,7 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
 /// Chains directed edges into closed loops (each node starts at most one
 /// edge).
 fn chain_loops(edges: &[(u32, u32)]) -> Result<Vec<Vec<u32>>, Degenerate> {
-    let mut next: HashMap<u32, u32> = HashMap::with_capacity(edges.len());
+    let mut next: HashMap<u32, u32> = HashMap::with_capacity_and_hasher(edges.len(), Default::default());
     for &(p, q) in edges {
         if next.insert(p, q).is_some() {
             return Err(Degenerate);
@@ -514,11 +519,26 @@ fn chain_loops(edges: &[(u32, u32)]) -> Result<Vec<Vec<u32>>, Degenerate> {
     Ok(loops)
 }
 
+/// The points of a grid square's plane in its two in-plane coordinates.
+struct Plane2d<'a> {
+    positions: &'a [[f64; 3]],
+    b: usize,
+    c: usize,
+}
+
+impl Plane2d<'_> {
+    /// Point `i` as `[b, c]` coordinates.
+    fn at(&self, i: u32) -> [f64; 2] {
+        let p = self.positions[i as usize];
+        [p[self.b], p[self.c]]
+    }
+}
+
 /// Twice the signed area of a loop in the plane.
-fn signed_area(lp: &[u32], p: &[[f64; 2]]) -> f64 {
+fn signed_area(lp: &[u32], p: &Plane2d) -> f64 {
     (0..lp.len())
         .map(|k| {
-            let (a, b) = (p[lp[k] as usize], p[lp[(k + 1) % lp.len()] as usize]);
+            let (a, b) = (p.at(lp[k]), p.at(lp[(k + 1) % lp.len()]));
             a[0] * b[1] - a[1] * b[0]
         })
         .sum()
@@ -532,10 +552,10 @@ fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
 }
 
 /// Whether `q` lies inside the loop `lp` (even-odd rule).
-fn point_in_loop(q: [f64; 2], lp: &[u32], p: &[[f64; 2]]) -> bool {
+fn point_in_loop(q: [f64; 2], lp: &[u32], p: &Plane2d) -> bool {
     let mut inside = false;
     for k in 0..lp.len() {
-        let (a, b) = (p[lp[k] as usize], p[lp[(k + 1) % lp.len()] as usize]);
+        let (a, b) = (p.at(lp[k]), p.at(lp[(k + 1) % lp.len()]));
         if (a[1] > q[1]) != (b[1] > q[1]) && q[0] < a[0] + (q[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
             inside = !inside;
         }
@@ -548,10 +568,10 @@ fn point_in_loop(q: [f64; 2], lp: &[u32], p: &[[f64; 2]]) -> bool {
 /// loop around it by two bridges between existing points, which splits
 /// that loop in two. No point is added, so the faces around stay as they
 /// are.
-fn without_holes(loops: Vec<Vec<u32>>, p: &[[f64; 2]]) -> Result<Vec<Vec<u32>>, Degenerate> {
+fn without_holes(loops: Vec<Vec<u32>>, p: &Plane2d) -> Result<Vec<Vec<u32>>, Degenerate> {
     let (mut outer, holes): (Vec<Vec<u32>>, Vec<Vec<u32>>) = loops.into_iter().partition(|l| signed_area(l, p) > 0.0);
     for hole in holes {
-        let q = p[hole[0] as usize];
+        let q = p.at(hole[0]);
         // the smallest outer loop around the hole
         let host = (0..outer.len())
             .filter(|&k| point_in_loop(q, &outer[k], p))
@@ -561,18 +581,18 @@ fn without_holes(loops: Vec<Vec<u32>>, p: &[[f64; 2]]) -> Result<Vec<Vec<u32>>, 
         let others: Vec<&Vec<u32>> =
             outer.iter().chain(std::iter::once(&hole)).chain(std::iter::once(&around)).collect();
         let clear = |a: u32, b: u32, extra: &[(u32, u32)]| {
-            let (pa, pb) = (p[a as usize], p[b as usize]);
+            let (pa, pb) = (p.at(a), p.at(b));
             others.iter().all(|l| {
                 (0..l.len()).all(|k| {
                     let (c, d) = (l[k], l[(k + 1) % l.len()]);
-                    [a, b].contains(&c) || [a, b].contains(&d) || !segments_cross(pa, pb, p[c as usize], p[d as usize])
+                    [a, b].contains(&c) || [a, b].contains(&d) || !segments_cross(pa, pb, p.at(c), p.at(d))
                 })
-            }) && extra.iter().all(|&(c, d)| !segments_cross(pa, pb, p[c as usize], p[d as usize]))
+            }) && extra.iter().all(|&(c, d)| !segments_cross(pa, pb, p.at(c), p.at(d)))
         };
         let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
         for (i, &o) in around.iter().enumerate() {
             for (j, &h) in hole.iter().enumerate() {
-                let (a, b) = (p[o as usize], p[h as usize]);
+                let (a, b) = (p.at(o), p.at(h));
                 pairs.push(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2), i, j));
             }
         }
@@ -613,7 +633,7 @@ fn components(polys: &[Vec<u32>]) -> Result<Vec<Vec<usize>>, Degenerate> {
         }
         x
     }
-    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::new();
+    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::default();
     for (k, p) in polys.iter().enumerate() {
         for m in 0..p.len() {
             let (a, b) = (p[m], p[(m + 1) % p.len()]);
@@ -627,7 +647,7 @@ fn components(polys: &[Vec<u32>]) -> Result<Vec<Vec<usize>>, Degenerate> {
         let (x, y) = (find(&mut parent, k), find(&mut parent, other));
         parent[x] = y;
     }
-    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::default();
     for k in 0..polys.len() {
         let r = find(&mut parent, k);
         groups.entry(r).or_default().push(k);
@@ -675,10 +695,11 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
                 );
                 report.hexahedra = cells.iter().filter(|c| matches!(c, Cell::Hex(_))).count();
                 report.pieces = cells.len() - report.hexahedra;
-                let mesh = PolyMesh::from_cells(sliced.positions, &cells)?;
                 // drop the nodes that clipping made and later cut away
-                let (mesh, _) = mesh.extract(&(0..cells.len()).collect::<Vec<_>>())?;
-                mesh.validate()?;
+                let (positions, cells) = used_nodes_only(sliced.positions, cells);
+                // (conforming by construction; `from_cells` checks every
+                // element closed and positive, a simulation validates it)
+                let mesh = PolyMesh::from_cells(positions, &cells)?;
                 return Ok((mesh, report));
             }
             Err(Degenerate) => continue,
@@ -690,6 +711,36 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
         "meets the surface degenerately on every grid shift tried; change it slightly",
     )
     .into())
+}
+
+/// The positions the cells use, in order, and the cells renumbered.
+fn used_nodes_only(positions: Vec<[f64; 3]>, cells: Vec<Cell>) -> (Vec<[f64; 3]>, Vec<Cell>) {
+    let mut id = vec![u32::MAX; positions.len()];
+    for c in &cells {
+        match c {
+            Cell::Hex(h) => h.iter().for_each(|&v| id[v as usize] = 0),
+            Cell::Tet(t) => t.iter().for_each(|&v| id[v as usize] = 0),
+            Cell::Polyhedron(f) => f.iter().flatten().for_each(|&v| id[v as usize] = 0),
+        }
+    }
+    let mut kept = Vec::new();
+    for (i, p) in positions.into_iter().enumerate() {
+        if id[i] == 0 {
+            id[i] = kept.len() as u32;
+            kept.push(p);
+        }
+    }
+    let cells = cells
+        .into_iter()
+        .map(|c| match c {
+            Cell::Hex(h) => Cell::Hex(h.map(|v| id[v as usize])),
+            Cell::Tet(t) => Cell::Tet(t.map(|v| id[v as usize])),
+            Cell::Polyhedron(f) => {
+                Cell::Polyhedron(f.into_iter().map(|l| l.into_iter().map(|v| id[v as usize]).collect()).collect())
+            }
+        })
+        .collect();
+    (kept, cells)
 }
 
 /// Merges every cell smaller than `min_volume` (m^3) into the face
@@ -709,9 +760,16 @@ fn merge_small(
         k.sort_unstable();
         k
     };
-    let mut owners: HashMap<Vec<u32>, Vec<usize>> = HashMap::new();
+    // the faces of the cells that share a node with a small one: the only
+    // faces a merge can look up
+    let small: Vec<usize> = (0..cells.len()).filter(|&e| volume[e] < min_volume).collect();
+    let mut near = vec![false; positions.len()];
+    for &e in &small {
+        faces[e].iter().flatten().flatten().for_each(|&v| near[v as usize] = true);
+    }
+    let mut owners: HashMap<Vec<u32>, Vec<usize>> = HashMap::default();
     for (e, fs) in faces.iter().enumerate() {
-        for f in fs.iter().flatten() {
+        for f in fs.iter().flatten().filter(|f| f.iter().all(|&v| near[v as usize])) {
             owners.entry(face_key(f)).or_default().push(e);
         }
     }
@@ -724,7 +782,7 @@ fn merge_small(
         }
         0.5 * dot(s, s).sqrt()
     };
-    let mut order: Vec<usize> = (0..cells.len()).filter(|&e| volume[e] < min_volume).collect();
+    let mut order = small;
     order.sort_by(|&a, &b| volume[a].total_cmp(&volume[b]).then(a.cmp(&b)));
     for e in order {
         if faces[e].is_none() || volume[e] >= min_volume {
@@ -732,7 +790,7 @@ fn merge_small(
         }
         let mut best: Option<(usize, f64)> = None;
         for f in faces[e].as_ref().into_iter().flatten() {
-            for &n in &owners[&face_key(f)] {
+            for &n in owners.get(&face_key(f)).into_iter().flatten() {
                 if n != e && faces[n].is_some() && best.is_none_or(|(_, a)| area(f) > a) {
                     best = Some((n, area(f)));
                 }
@@ -741,12 +799,11 @@ fn merge_small(
         let Some((n, _)) = best else { continue };
         let mine = faces[e].take().unwrap_or_default();
         let theirs = faces[n].take().unwrap_or_default();
-        let shared: std::collections::HashSet<Vec<u32>> =
+        let shared: rustc_hash::FxHashSet<Vec<u32>> =
             mine.iter().map(|f| face_key(f)).filter(|k| theirs.iter().any(|g| face_key(g) == *k)).collect();
         let union: Vec<Vec<u32>> = theirs.into_iter().chain(mine).filter(|f| !shared.contains(&face_key(f))).collect();
         for f in &union {
-            let users = owners.get_mut(&face_key(f)).expect("face of a cell");
-            for u in users.iter_mut() {
+            for u in owners.get_mut(&face_key(f)).into_iter().flatten() {
                 if *u == e {
                     *u = n;
                 }

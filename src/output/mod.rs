@@ -6,7 +6,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::dg::DgElements;
-use crate::io::{write_boundary_obj, write_surface_obj, write_vtu, IoError, VtuFields};
+use crate::io::{write_boundary_obj, write_surface_obj, write_surface_vtu, write_vtu, IoError, VtuFields};
 use crate::sim::{Located, PhaseTimings, Simulation};
 
 /// Frame formats.
@@ -44,6 +44,23 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                 write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, positions, &fields)?;
                 if let Some(dg) = sim.dg() {
                     write_dg_elements(&dir.join(format!("frame_{index:04}_dg.vtu")), sim, dg, &vm)?;
+                }
+                if let (Some(surface), Some(rest), Some(v)) =
+                    (sim.embedded_surface(), sim.embedded_rest(), sim.embedded_velocities())
+                {
+                    let u: Vec<[f64; 3]> = surface
+                        .vertices
+                        .iter()
+                        .zip(&rest.vertices)
+                        .map(|(x, x0)| [x[0] - x0[0], x[1] - x0[1], x[2] - x0[2]])
+                        .collect();
+                    let path = dir.join(format!("frame_{index:04}_embedded.vtu"));
+                    write_surface_vtu(
+                        &path,
+                        &surface.vertices,
+                        &surface.triangles,
+                        &[("displacement", &u), ("velocity", &v)],
+                    )?;
                 }
             }
             Format::Obj => {

@@ -229,10 +229,13 @@ impl Simulation {
     }
 
     /// Embeds a surface (rest coordinates) in the body: it moves with the
-    /// body by moving least squares over the nodes (kaufmann2008 §8, see
-    /// [`EmbeddedSurface`]), and the colliders act on its vertices instead
-    /// of the nodes (§9), each with the collider's full stiffness. A vertex
-    /// out of reach of the nodes is an error naming it.
+    /// body by the shape functions of the elements holding its vertices
+    /// (martin2008 §7), or for discontinuous Galerkin by moving least
+    /// squares over the stitched nodes (kaufmann2008 §8; see
+    /// [`embedding`]); the colliders act on its vertices instead of the
+    /// nodes (kaufmann2008 §9), each with the collider's full stiffness,
+    /// their forces and stiffness spread by the same weights. A vertex in no
+    /// element (or out of reach of the nodes) is an error naming it.
     pub fn embed(&mut self, surface: EmbeddedSurface) -> Result<(), Error> {
         if let Some((i, v)) = surface.vertices.iter().enumerate().find(|(_, v)| !v.iter().all(|x| x.is_finite())) {
             return Err(ParamError::new("embedded vertex", format!("{i} at {v:?}"), "must be finite (m)").into());
@@ -251,10 +254,13 @@ impl Simulation {
         let Some((surface, _)) = self.embedded.take() else {
             return Ok(());
         };
-        let to_nodes = embedding::mls_map(&self.mesh, &surface.vertices)?;
         let map = match &self.elements {
-            Model::Nodal(_) => to_nodes,
-            Model::Dg(_) => embedding::compose(&to_nodes, &self.nodes.map),
+            Model::Nodal(nodal) => {
+                let harmonic = &self.params.basis.harmonic;
+                embedding::basis_map(&self.mesh, &nodal.store, harmonic, &surface.vertices)?
+                    .ok_or_else(|| Error::Internal("a nodal store without nodal shape functions".into()))?
+            }
+            Model::Dg(_) => embedding::compose(&embedding::mls_map(&self.mesh, &surface.vertices)?, &self.nodes.map),
         };
         self.contacts = Some((map.clone(), vec![1.0; surface.vertices.len()]));
         self.embedded = Some((surface, map));
@@ -268,6 +274,20 @@ impl Simulation {
         let mut vertices = Vec::new();
         map.apply(&self.state.position, &mut vertices);
         Some(EmbeddedSurface { vertices, triangles: surface.triangles.clone() })
+    }
+
+    /// The velocities of the embedded surface's vertices (m/s), if one is
+    /// embedded.
+    pub fn embedded_velocities(&self) -> Option<Vec<[f64; 3]>> {
+        let (_, map) = self.embedded.as_ref()?;
+        let mut v = Vec::new();
+        map.apply(&self.state.velocity, &mut v);
+        Some(v)
+    }
+
+    /// The embedded surface at rest, as it was given, if one is embedded.
+    pub fn embedded_rest(&self) -> Option<&EmbeddedSurface> {
+        self.embedded.as_ref().map(|(surface, _)| surface)
     }
 
     /// Adds a Dirichlet region (checked, see [`FixedRegion::check`]): the

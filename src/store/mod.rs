@@ -14,6 +14,7 @@
 //! basis (`trilinear`).
 
 pub mod dg;
+mod evaluate;
 pub mod harmonic;
 mod health;
 mod mean_value;

@@ -101,6 +101,36 @@ fn jacobian(x: &[[f64; 3]], corners: &[usize; 8], xi: [f64; 3]) -> Option<(f64, 
     (det != 0.0 && det.is_finite()).then(|| (det, std::array::from_fn(|r| std::array::from_fn(|c| cof(c, r) / det))))
 }
 
+/// The shape function values (reference corner order) at the point `x`
+/// of the hexahedron with nodes `nodes` and corners `corners`: the
+/// reference point by Newton's method on the trilinear map; `None` if it
+/// does not converge (a point far outside, or a degenerate map).
+pub(super) fn values_at(nodes: &[[f64; 3]], corners: &[usize; 8], x: [f64; 3]) -> Option<[f64; 8]> {
+    let size = corners
+        .iter()
+        .map(|&c| cleave_kernels::vec3::norm(cleave_kernels::vec3::sub(nodes[c], nodes[corners[0]])))
+        .fold(0.0, f64::max);
+    let mut xi = [0.5; 3];
+    for _ in 0..30 {
+        let (n, _) = reference(xi);
+        let mut r = [0.0; 3];
+        for a in 0..8 {
+            for k in 0..3 {
+                r[k] += n[a] * nodes[corners[a]][k];
+            }
+        }
+        let r = [r[0] - x[0], r[1] - x[1], r[2] - x[2]];
+        if (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt() <= 1e-12 * size {
+            return Some(n);
+        }
+        let (_, inv) = jacobian(nodes, corners, xi)?;
+        for i in 0..3 {
+            xi[i] -= inv[i][0] * r[0] + inv[i][1] * r[1] + inv[i][2] * r[2];
+        }
+    }
+    None
+}
+
 /// Builds the batch of trilinear hexahedra `elements`.
 pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u32>) -> Result<Batch, BasisError> {
     let (lambda, mu) = material.lame();

@@ -35,6 +35,9 @@ pub enum Group {
     Dg,
     /// Global assembly, corotated steps and cuts on large meshes.
     Steps,
+    /// Meshing surfaces (grid slicing, octree), embedded-surface updates
+    /// and refinement steps.
+    Meshing,
 }
 
 /// One measured stage.
@@ -212,6 +215,9 @@ pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Erro
     }
     if run(Group::Steps) {
         out.extend(step_suite(quick, &material)?);
+    }
+    if run(Group::Meshing) {
+        out.extend(meshing_measurements(quick)?);
     }
     Ok(Report { threads: rayon::current_num_threads(), measurements: out })
 }
@@ -575,4 +581,96 @@ fn step_measurements(label: &str, mesh: PolyMesh, solver: SolverKind, steps: usi
         m(format!("step solve ({kind})"), sol, Some(("iterations/step".into(), iterations as f64 / steps as f64))),
         m(format!("step total ({kind})"), per(t.steps(), before.steps()), None),
     ])
+}
+
+/// A row of a whole-mesh stage.
+fn mesh_row(name: &str, label: String, mesh: &PolyMesh, ms: f64, extra: Option<(String, f64)>) -> Measurement {
+    let n = mesh.elements.len();
+    Measurement {
+        name: name.into(),
+        mesh: label,
+        elements: n,
+        nodes: mesh.nodes.len(),
+        ms,
+        elements_per_s: n as f64 / (ms * 1e-3),
+        extra,
+    }
+}
+
+/// Meshing bunny.obj by grid slicing (about 10^3, 10^4 and 10^5 elements)
+/// and by octrees; the per-frame update of the full-resolution bunny
+/// (`bunny_closed.obj`, 70k triangles, research use only: read from
+/// `../shared/data` when it is there) embedded in a sliced mesh of about
+/// 10^4 elements; one stress refinement step of the bent bar.
+fn meshing_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
+    use cleave::meshing::{grid_slice, octree};
+    use cleave::sim::{EmbeddedSurface, RefineRule, RefineSplit, SimulationParams};
+    let reps = if quick { 1 } else { 3 };
+    let (surface, _) = cleave::surface::prepare(&cleave::io::read_surface(&asset("bunny.obj"))?)?;
+    let mut out = Vec::new();
+    let cells: &[f64] = if quick { &[1.0] } else { &[0.55, 0.26, 0.125] };
+    for &cell in cells {
+        let (ms, result) = best_ms(reps, || grid_slice(&surface, cell, 0.05));
+        let (mesh, _) = result?;
+        out.push(mesh_row("grid slice", format!("bunny.obj, cell {cell}"), &mesh, ms, None));
+    }
+    let depths: &[usize] = if quick { &[3] } else { &[4, 5, 6] };
+    for &depth in depths {
+        let (ms, result) = best_ms(reps, || octree(&surface, depth));
+        let (mesh, _) = result?;
+        out.push(mesh_row("octree", format!("bunny.obj, depth {depth}"), &mesh, ms, None));
+    }
+    let closed = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/bunny_closed.obj");
+    if !quick && closed.exists() {
+        let (fine, _) = cleave::surface::prepare(&cleave::io::read_surface(&closed)?)?;
+        // an octree mesh of about 10^4 mean value cells of the same bunny,
+        // and its surface in it
+        let mut sim = Simulation::new(octree(&fine, 6)?.0, SimulationParams::default())?;
+        let label = format!("bunny_closed in {} octree cells", sim.mesh().elements.len());
+        let embedded = EmbeddedSurface { vertices: fine.vertices.clone(), triangles: fine.triangles.clone() };
+        let (ms, r) = best_ms(1, || sim.embed(embedded.clone()));
+        r?;
+        out.push(mesh_row(
+            "embed (build)",
+            label.clone(),
+            sim.mesh(),
+            ms,
+            Some(("vertices".into(), fine.vertices.len() as f64)),
+        ));
+        let (ms, _) = best_ms(20, || sim.embedded_surface());
+        out.push(mesh_row(
+            "embedded update",
+            label,
+            sim.mesh(),
+            ms,
+            Some(("vertices".into(), fine.vertices.len() as f64)),
+        ));
+    }
+    // one refinement step of the bent bar: stresses, splits, rebuild
+    let bar = || -> Result<Simulation, Error> {
+        let mut p = SimulationParams { gravity: [0.0, 0.0, -9.81], ..Default::default() };
+        p.material = Material::new(1e6, 0.3, 1000.0)?;
+        let mut sim = Simulation::new(box_hex([0.0; 3], [4.5, 1.0, 1.0], [18, 4, 4])?, p)?;
+        sim.fix(cleave::sim::FixedRegion::clamp([-1.0; 3], [0.001, 2.0, 2.0]))?;
+        sim.fix(cleave::sim::FixedRegion::clamp([4.499, -1.0, -1.0], [6.0, 2.0, 2.0]))?;
+        sim.solve_static()?;
+        Ok(sim)
+    };
+    let rule = RefineRule { threshold: 2e4, split: RefineSplit::Halves, max_level: 1 };
+    let (mut best, mut split) = (f64::INFINITY, 0);
+    for _ in 0..reps {
+        let mut sim = bar()?;
+        let t = Instant::now();
+        split = sim.refine_by_stress(&rule)?.refined;
+        best = best.min(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let sim = bar()?;
+    out.push(mesh_row(
+        "refine step (1-to-2)",
+        "bar 18x4x4 hex".into(),
+        sim.mesh(),
+        best,
+        Some(("split".into(), split as f64)),
+    ));
+    Ok(out)
 }

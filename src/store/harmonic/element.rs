@@ -53,7 +53,7 @@ impl ElementBasis {
 /// Generalised winding number of the closed surface `triangles` around `p`
 /// (1 inside, 0 outside): the sum of the triangles' solid angles over 4π
 /// (Van Oosterom & Strackee).
-fn winding_number(verts: &[[f64; 3]], triangles: &[[u32; 3]], p: [f64; 3]) -> f64 {
+pub(crate) fn winding_number(verts: &[[f64; 3]], triangles: &[[u32; 3]], p: [f64; 3]) -> f64 {
     let mut omega = 0.0;
     for t in triangles {
         let [a, b, c] = t.map(|i| sub(verts[i as usize], p));

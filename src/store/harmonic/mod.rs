@@ -29,6 +29,7 @@ use cleave_kernels::tet::signed_volume;
 use cleave_kernels::{elasticity, vec3};
 use rayon::prelude::*;
 
+pub(crate) use element::winding_number;
 pub use element::{element_basis, ElementBasis};
 pub use face::{FaceBasis, FaceFunction};
 
