@@ -208,7 +208,7 @@ fn every_shipped_scene_runs_through_its_cuts_and_stays_healthy() {
             let bound = 2.0 * summary.free_fall_speed;
             assert!(summary.max_node_speed.value <= bound, "{name}: {:?} > {bound}", summary.max_node_speed);
         }
-        let floor = cleave::store::HealthFloors::default().mass_fraction;
+        let floor = scene.scene.basis_options().health.mass_fraction;
         assert!(summary.min_mass_ratio.value >= floor, "{name}: {:?}", summary.min_mass_ratio);
         assert!(out.join("summary.json").exists());
         names.push(name);

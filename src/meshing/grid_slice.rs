@@ -25,7 +25,7 @@
 
 use rustc_hash::FxHashMap as HashMap;
 
-use cleave_kernels::vec3::{cross, dot, sub};
+use cleave_kernels::vec3::{cross, dot, norm, sub};
 
 use crate::io::Surface;
 use crate::mesh::{Cell, PolyMesh};
@@ -73,6 +73,32 @@ impl Grid {
     /// Coordinate of plane `i` of axis `a` (m).
     fn plane(&self, a: usize, i: i32) -> f64 {
         self.origin[a] + i as f64 * self.h
+    }
+}
+
+/// How [`grid_slice`] slices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SliceOptions {
+    /// Pieces smaller than this fraction of a cell's volume are merged
+    /// into a face neighbour (default 0.05).
+    pub merge_below: f64,
+    /// Surface simplification, as a fraction of a cell (default 0: exact
+    /// pieces). Exact pieces keep every surface vertex, and points a hair
+    /// apart where the surface passes close to a grid plane or line: nodes
+    /// of tiny mass and nearly soft elements for the nodal families. With
+    /// `simplify > 0` the surface inside a cell is replaced by a fan over
+    /// its boundary loop on the cell's faces from its centroid, and points of
+    /// those loops closer than `simplify` cells to another are dropped
+    /// (martin2008's way: coarse elements, with the exact surface embedded
+    /// in them). The boundary then approximates the surface to about the
+    /// cell's curvature error; patches with several boundary loops (a thin
+    /// part through a cell) stay exact.
+    pub simplify: f64,
+}
+
+impl Default for SliceOptions {
+    fn default() -> Self {
+        SliceOptions { merge_below: 0.05, simplify: 0.0 }
     }
 }
 
@@ -274,8 +300,137 @@ fn loops_volume(positions: &[[f64; 3]], faces: &[Vec<u32>]) -> f64 {
         .sum()
 }
 
-/// One slicing pass on `grid`.
-fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
+/// A cut-out piece: its face loops, and which of them are surface pieces.
+struct Piece {
+    faces: Vec<Vec<u32>>,
+    surface: Vec<bool>,
+}
+
+/// The pieces with their surfaces simplified (see [`SliceOptions`]):
+/// a piece whose surface patch has one boundary loop gets a fan over that
+/// loop from the patch's area centroid (a new point) instead, and the points of those loops closer than
+/// `spacing` (m) to a kept point are dropped from every loop holding them,
+/// if they lie on one grid plane (where a cap meets one square's face, so
+/// both faces of every element at the point lose it alike and the mesh
+/// stays closed and conforming). Points of pieces kept exact (patches with
+/// no or several boundary loops) are never dropped.
+fn simplified(pieces: Vec<Piece>, points: &Points, positions: &mut Vec<[f64; 3]>, spacing: f64) -> Vec<Piece> {
+    // the boundary loop of each piece's surface patch, if it has one
+    let caps: Vec<Option<Vec<u32>>> = pieces
+        .iter()
+        .map(|piece| {
+            let edges: Vec<(u32, u32)> = piece
+                .faces
+                .iter()
+                .zip(&piece.surface)
+                .filter(|(_, &s)| s)
+                .flat_map(|(f, _)| (0..f.len()).map(move |k| (f[k], f[(k + 1) % f.len()])))
+                .collect();
+            let set: std::collections::HashSet<(u32, u32)> = edges.iter().copied().collect();
+            let boundary: Vec<(u32, u32)> = edges.iter().copied().filter(|&(a, b)| !set.contains(&(b, a))).collect();
+            match chain_loops(&boundary) {
+                Ok(mut loops) if loops.len() == 1 => loops.pop(),
+                _ => None,
+            }
+        })
+        .collect();
+    // points that stay: grid vertices and every point of an exact piece
+    let n = points.positions.len();
+    let mut keep = vec![false; n];
+    for (piece, cap) in pieces.iter().zip(&caps) {
+        for &v in piece.faces.iter().flatten() {
+            if cap.is_none() || points.keys[v as usize].feature == Feature::Grid {
+                keep[v as usize] = true;
+            }
+        }
+    }
+    let cell = |p: [f64; 3]| p.map(|x| (x / spacing).floor() as i64);
+    let mut kept: HashMap<[i64; 3], Vec<u32>> = HashMap::default();
+    for v in (0..n).filter(|&v| keep[v]) {
+        kept.entry(cell(points.positions[v])).or_default().push(v as u32);
+    }
+    // candidates: the cap loops' points on one grid plane, where a cap
+    // meets one square's face (a point on a grid line is where two squares
+    // and a cap meet, and dropping it would open the element)
+    for v in caps.iter().flatten().flatten() {
+        if points.keys[*v as usize].plane_count() != 1 && !keep[*v as usize] {
+            keep[*v as usize] = true;
+            kept.entry(cell(points.positions[*v as usize])).or_default().push(*v);
+        }
+    }
+    let mut candidates: Vec<u32> = caps.iter().flatten().flatten().copied().filter(|&v| !keep[v as usize]).collect();
+    candidates.sort_unstable();
+    candidates.dedup();
+    let mut dropped = vec![false; n];
+    for v in candidates {
+        if keep[v as usize] || dropped[v as usize] {
+            continue;
+        }
+        let p = points.positions[v as usize];
+        let c = cell(p);
+        let near = (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dz| {
+                    kept.get(&[c[0] + dx, c[1] + dy, c[2] + dz]).into_iter().flatten().any(|&w| {
+                        let q = points.positions[w as usize];
+                        (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>() < spacing * spacing
+                    })
+                })
+            })
+        });
+        if near {
+            dropped[v as usize] = true;
+        } else {
+            keep[v as usize] = true;
+            kept.entry(c).or_default().push(v);
+        }
+    }
+    let filter = |lp: &[u32]| -> Vec<u32> { lp.iter().copied().filter(|&v| !dropped[v as usize]).collect() };
+    let mut out = Vec::with_capacity(pieces.len());
+    for (piece, cap) in pieces.into_iter().zip(caps) {
+        let Some(cap) = cap else {
+            out.push(piece);
+            continue;
+        };
+        let cap = filter(&cap);
+        if cap.len() < 3 {
+            continue;
+        }
+        let mut faces: Vec<Vec<u32>> = piece
+            .faces
+            .iter()
+            .zip(&piece.surface)
+            .filter(|(_, &s)| !s)
+            .map(|(f, _)| filter(f))
+            .filter(|f| f.len() >= 3)
+            .collect();
+        // the cap: a fan over the loop from the area centroid of the
+        // surface patch it replaces
+        let (mut area, mut centre) = (0.0, [0.0; 3]);
+        for f in piece.faces.iter().zip(&piece.surface).filter(|(_, &s)| s).map(|(f, _)| f) {
+            let p0 = points.positions[f[0] as usize];
+            for k in 1..f.len() - 1 {
+                let (p1, p2) = (points.positions[f[k] as usize], points.positions[f[k + 1] as usize]);
+                let a = 0.5 * norm(cross(sub(p1, p0), sub(p2, p0)));
+                area += a;
+                centre = [0, 1, 2].map(|i| centre[i] + a * (p0[i] + p1[i] + p2[i]) / 3.0);
+            }
+        }
+        if !(area > 0.0) {
+            continue;
+        }
+        let c = positions.len() as u32;
+        positions.push(centre.map(|x| x / area));
+        faces.extend((0..cap.len()).map(|k| vec![c, cap[k], cap[(k + 1) % cap.len()]]));
+        let surface = vec![false; faces.len()];
+        out.push(Piece { faces, surface });
+    }
+    out
+}
+
+/// One slicing pass on `grid`; `simplify` (m): see [`simplified`] (0:
+/// exact pieces).
+fn slice(surface: &Surface, grid: &Grid, simplify: f64) -> Result<Sliced, Degenerate> {
     let normals: Vec<[f64; 3]> = surface
         .triangles
         .iter()
@@ -441,9 +596,9 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
         regions.insert(sq, loops);
     }
     // 3. the pieces of every cell: connected sets of its polygons
-    let mut cells_out = Vec::new();
-    let mut volumes = Vec::new();
+    let mut all: Vec<Piece> = Vec::new();
     for cell in &cell_list {
+        let surface_polys = pieces[cell].len();
         let mut polys: Vec<Vec<u32>> = pieces[cell].clone();
         for a in 0..3 {
             let (b, c) = ((a + 1) % 3, (a + 2) % 3);
@@ -458,10 +613,20 @@ fn slice(surface: &Surface, grid: &Grid) -> Result<Sliced, Degenerate> {
             }
         }
         for comp in components(&polys)? {
-            let faces: Vec<Vec<u32>> = comp.iter().map(|&k| polys[k].clone()).collect();
-            volumes.push(loops_volume(&points.positions, &faces));
-            cells_out.push(Cell::Polyhedron(faces));
+            let surface: Vec<bool> = comp.iter().map(|&k| k < surface_polys).collect();
+            all.push(Piece { faces: comp.iter().map(|&k| polys[k].clone()).collect(), surface });
         }
+    }
+    if simplify > 0.0 {
+        let mut positions = points.positions.clone();
+        all = simplified(all, &points, &mut positions, simplify);
+        points.positions = positions;
+    }
+    let mut cells_out = Vec::new();
+    let mut volumes = Vec::new();
+    for piece in all {
+        volumes.push(loops_volume(&points.positions, &piece.faces));
+        cells_out.push(Cell::Polyhedron(piece.faces));
     }
     // 4. whole hexahedra: cells without pieces whose corners are inside
     for i in 0..grid.cells[0] {
@@ -658,10 +823,10 @@ fn components(polys: &[Vec<u32>]) -> Result<Vec<Vec<usize>>, Degenerate> {
 }
 
 /// Meshes the inside of `surface` (closed, outward: see
-/// [`crate::surface::prepare`]) by a grid of cell size `cell` (m); pieces
-/// smaller than `merge_below` of a cell's volume are merged into a face
-/// neighbour (see the module docs).
-pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(PolyMesh, SliceReport), Error> {
+/// [`crate::surface::prepare`]) by a grid of cell size `cell` (m) (see the
+/// module docs and [`SliceOptions`]).
+pub fn grid_slice(surface: &Surface, cell: f64, options: &SliceOptions) -> Result<(PolyMesh, SliceReport), Error> {
+    let SliceOptions { merge_below, simplify } = *options;
     if !(cell > 0.0 && cell.is_finite()) {
         return Err(ParamError::new("meshing.cell", cell, "must be a finite cell size > 0 (m)").into());
     }
@@ -683,7 +848,7 @@ pub fn grid_slice(surface: &Surface, cell: f64, merge_below: f64) -> Result<(Pol
         let origin = [0, 1, 2].map(|a| lo[a] - cell * (s + 0.031 * a as f64));
         let cells = [0, 1, 2].map(|a| ((hi[a] - origin[a]) / cell).floor() as i32 + 2);
         let grid = Grid { origin, h: cell, cells };
-        match slice(surface, &grid) {
+        match slice(surface, &grid, simplify * cell) {
             Ok(sliced) => {
                 let mut report = SliceReport { shifts: n, cells: cells.map(|c| c as usize), ..Default::default() };
                 let cells = merge_small(

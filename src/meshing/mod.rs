@@ -8,7 +8,7 @@ mod random_convex;
 mod samples;
 
 pub use box_grid::{box_hex, box_l_prisms, box_tet, prism};
-pub use grid_slice::{grid_slice, SliceReport};
+pub use grid_slice::{grid_slice, SliceOptions, SliceReport};
 pub use octree::{octree, OctreeReport};
 pub use random_convex::{clipped_box, random_convex};
 pub use samples::{element_with_vertices, replicate};

@@ -7,7 +7,9 @@ use std::time::Instant;
 use super::{BoxElement, Generator, LoadedScene, MeshingMethod, Mode, SceneError};
 use crate::io::{read_mesh, read_surface};
 use crate::mesh::PolyMesh;
-use crate::meshing::{box_hex, box_l_prisms, box_tet, clipped_box, grid_slice, octree, prism, random_convex};
+use crate::meshing::{
+    box_hex, box_l_prisms, box_tet, clipped_box, grid_slice, octree, prism, random_convex, SliceOptions,
+};
 use crate::output::{write_frame, write_summary, DgSummary, MeanMax, MeshCounts, SolverSummary, Summary};
 use crate::sim::{EmbeddedSurface, Located, Simulation};
 use crate::surface::prepare;
@@ -51,8 +53,11 @@ impl LoadedScene {
                     let (surface, _) = prepare(&raw).map_err(|e| self.engine(e))?;
                     let meshed = match me.method {
                         MeshingMethod::GridSlice => {
-                            grid_slice(&surface, me.cell.unwrap_or(f64::NAN), me.merge_below.unwrap_or(0.05))
-                                .map(|(mesh, _)| mesh)
+                            let options = SliceOptions {
+                                merge_below: me.merge_below.unwrap_or(0.05),
+                                simplify: me.simplify.unwrap_or(0.0),
+                            };
+                            grid_slice(&surface, me.cell.unwrap_or(f64::NAN), &options).map(|(mesh, _)| mesh)
                         }
                         MeshingMethod::Octree => octree(&surface, me.max_depth.unwrap_or(0)).map(|(mesh, _)| mesh),
                     };

@@ -10,7 +10,7 @@ use crate::param::ParamError;
 use crate::sim::{Collider, FixedRegion, SimulationParams};
 use crate::solve::SolverKind;
 use crate::store::dg::{DgOptions, Flux as DgFlux};
-use crate::store::{self, BasisOptions, HarmonicOptions, QuadratureRule};
+use crate::store::{self, BasisOptions, HarmonicOptions, HealthFloors, QuadratureRule};
 use crate::topology::polygon_plane;
 
 /// A whole scene.
@@ -122,6 +122,10 @@ pub struct MeshingSpec {
     /// `grid-slice`: pieces below this fraction of a cell's volume are
     /// merged into a face neighbour (default 0.05).
     pub merge_below: Option<f64>,
+    /// `grid-slice`: surface simplification as a fraction of a cell
+    /// (default 0: exact pieces; about 0.1 for the nodal families, see
+    /// [`crate::meshing::SliceOptions`]).
+    pub simplify: Option<f64>,
 }
 
 /// Meshing methods for surface input.
@@ -170,6 +174,11 @@ pub struct BasisSpec {
     pub edge_samples: Option<usize>,
     /// Harmonic only: Gauss points per direction on each sub-tetrahedron (2).
     pub quadrature_order: Option<usize>,
+    /// The health check's floor on a node's lumped mass share in an
+    /// element, relative to the mean share (default 0.01; see
+    /// [`crate::store::HealthFloors`]). Meshes sliced from surfaces carry
+    /// nodes of small share in otherwise stiff, healthy elements.
+    pub mass_floor: Option<f64>,
 }
 
 impl Default for BasisSpec {
@@ -183,6 +192,7 @@ impl Default for BasisSpec {
             offset: None,
             edge_samples: None,
             quadrature_order: None,
+            mass_floor: None,
         }
     }
 }
@@ -518,6 +528,7 @@ fn key_of(name: &str) -> String {
         "mass_damping" | "stiffness_damping" => "simulation.damping".into(),
         "tolerance" | "max_iterations" => format!("solver.{name}"),
         "offset" | "edge_samples" | "quadrature_order" | "degree" | "penalty" => format!("basis.{name}"),
+        "mass_fraction" => "basis.mass_floor".into(),
         _ => "simulation".into(),
     }
 }
@@ -739,7 +750,9 @@ impl Scene {
             },
             penalty: b.penalty.unwrap_or(d.penalty),
         };
-        BasisOptions { family, quadrature, harmonic, dg, ..Default::default() }
+        let d = HealthFloors::default();
+        let health = HealthFloors { mass_fraction: b.mass_floor.unwrap_or(d.mass_fraction), ..d };
+        BasisOptions { family, quadrature, harmonic, dg, health }
     }
 
     /// The engine's simulation parameters of the scene.

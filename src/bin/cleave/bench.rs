@@ -610,7 +610,7 @@ fn meshing_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
     let mut out = Vec::new();
     let cells: &[f64] = if quick { &[1.0] } else { &[0.55, 0.26, 0.125] };
     for &cell in cells {
-        let (ms, result) = best_ms(reps, || grid_slice(&surface, cell, 0.05));
+        let (ms, result) = best_ms(reps, || grid_slice(&surface, cell, &Default::default()));
         let (mesh, _) = result?;
         out.push(mesh_row("grid slice", format!("bunny.obj, cell {cell}"), &mesh, ms, None));
     }

@@ -9,9 +9,12 @@
 //! rule of `quadrature_order^3` points. An element with no star point is
 //! first cut by a grid of half its diameter into the exact pieces
 //! `element ∩ box` (the grid slicer of [`crate::meshing::grid_slice`]),
-//! finer where a piece is still not star-shaped: every sub-tetrahedron
-//! then lies inside the element and has a positive weight, so any
-//! planar-faced polyhedron is integrated. The gradients are then shifted per
+//! finer where a piece is still not star-shaped (three levels): every
+//! sub-tetrahedron then lies inside the element and has a positive weight,
+//! so any planar-faced polyhedron is integrated. (A vertex whose faces
+//! twist so that no point near it sees them all is never separated by
+//! slicing; the tiny pieces around it left on the last level take signed
+//! cones, exact for polynomials.) The gradients are then shifted per
 //! element so that `Σ_q w_q ∇N_a = ∮ b_a n`, with the face moments shared by
 //! both sides of every face: the discrete divergence theorem holds exactly
 //! and the patch test passes whatever the MFS error. Masses are lumped by
@@ -107,6 +110,18 @@ pub fn face_bases(
 /// plane), by subgradient ascent of the smallest such distance from the
 /// centroid; `None` if none is found (the element is not star-shaped).
 pub fn star_point(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64) -> Option<[f64; 3]> {
+    star_point_clear_by(verts, triangles, diameter, 1e-3)
+}
+
+/// [`star_point`] with the clearance `clearance` (fraction of the
+/// diameter): the pieces of a sliced element near a vertex whose kernel is
+/// thin accept a point closer to their faces.
+fn star_point_clear_by(
+    verts: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    diameter: f64,
+    clearance_floor: f64,
+) -> Option<[f64; 3]> {
     let planes: Vec<([f64; 3], [f64; 3])> = triangles
         .iter()
         .filter_map(|t| {
@@ -135,7 +150,7 @@ pub fn star_point(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64) -> 
     let mut step = 0.1 * diameter;
     for _ in 0..400 {
         let (d, n) = clearance(x);
-        if d > 1e-3 * diameter && positive(x) {
+        if d > clearance_floor * diameter && positive(x) {
             return Some(x);
         }
         x = vec3::sub(x, vec3::scale(n, step));
@@ -159,15 +174,24 @@ fn sliced_rule(
     points: &mut Vec<[f64; 3]>,
     weights: &mut Vec<f64>,
 ) -> bool {
-    let Ok((pieces, _)) = crate::meshing::grid_slice(surface, cell, 0.0) else { return false };
+    let Ok((pieces, _)) =
+        crate::meshing::grid_slice(surface, cell, &crate::meshing::SliceOptions { merge_below: 0.0, simplify: 0.0 })
+    else {
+        return false;
+    };
     (0..pieces.elements.len()).all(|e| {
         let verts: Vec<[f64; 3]> = pieces.elements[e].nodes.iter().map(|&v| pieces.nodes[v as usize]).collect();
         let local = |g: u32| pieces.elements[e].nodes.binary_search(&g).map(|i| i as u32).unwrap_or(0);
         let triangles: Vec<[u32; 3]> = pieces.element_triangles(e).map(|t| t.map(local)).collect();
         // a thin piece has no point clear of its faces, but a convex one is
-        // seen whole from its centroid
-        let centroid = Some(pieces.element_centroid(e)).filter(|_| pieces.is_convex(e, 0.0));
-        match star_point(&verts, &triangles, pieces.element_diameter(e)).or(centroid) {
+        // seen whole from its centroid; on the last level, a piece still
+        // without a star point (a vertex whose faces twist so that no
+        // point sees them all, which slicing never separates) takes signed
+        // cones from its centroid: exact for polynomials, and its
+        // negative weights are a sliver of the element's (the store's
+        // health check still judges the result)
+        let centroid = Some(pieces.element_centroid(e)).filter(|_| levels == 0 || pieces.is_convex(e, 0.0));
+        match star_point_clear_by(&verts, &triangles, pieces.element_diameter(e), 1e-6).or(centroid) {
             Some(apex) => {
                 cone_rule(&verts, &triangles, apex, order, points, weights);
                 true
