@@ -15,7 +15,7 @@
 //! one face: the mesh is conforming and the basis functions of any family
 //! stay continuous. Leaves are convex (cubes with flat, subdivided sides).
 
-use std::collections::{HashMap, HashSet};
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 
 use cleave_kernels::vec3::{cross, dot, sub};
 
@@ -60,9 +60,39 @@ fn triangle_meets_box(t: [[f64; 3]; 3], centre: [f64; 3], half: f64) -> bool {
     !unit.iter().any(|&u| e.iter().any(|&ed| separated(cross(u, ed))))
 }
 
+/// The surface's triangles binned by the xy-cells of a grid their
+/// bounding boxes overlap: what a vertical ray can cross.
+struct Columns {
+    size: f64,
+    bins: HashMap<[i64; 2], Vec<u32>>,
+}
+
+impl Columns {
+    fn new(surface: &Surface, size: f64) -> Self {
+        let mut bins: HashMap<[i64; 2], Vec<u32>> = HashMap::default();
+        for (t, tri) in surface.triangles.iter().enumerate() {
+            let p = tri.map(|v| surface.vertices[v as usize]);
+            let lo = [0, 1].map(|a| (p[0][a].min(p[1][a]).min(p[2][a]) / size).floor() as i64);
+            let hi = [0, 1].map(|a| (p[0][a].max(p[1][a]).max(p[2][a]) / size).floor() as i64);
+            for i in lo[0]..=hi[0] {
+                for j in lo[1]..=hi[1] {
+                    bins.entry([i, j]).or_default().push(t as u32);
+                }
+            }
+        }
+        Columns { size, bins }
+    }
+
+    /// The triangles a vertical ray through `p` can cross.
+    fn at(&self, p: [f64; 3]) -> &[u32] {
+        let key = [(p[0] / self.size).floor() as i64, (p[1] / self.size).floor() as i64];
+        self.bins.get(&key).map_or(&[], |v| v.as_slice())
+    }
+}
+
 /// Whether `p` is inside the closed outward `surface`: the parity of the
-/// crossings of a ray along +z (the caller keeps `p` off the surface's
-/// edges by the shifted root cube).
+/// crossings of a ray along +z through `triangles` (those of its column;
+/// the caller keeps `p` off the surface's edges by the shifted root cube).
 fn inside(surface: &Surface, triangles: &[u32], p: [f64; 3]) -> bool {
     let mut crossings = 0;
     for &t in triangles {
@@ -104,7 +134,7 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
     };
     // refine toward the surface; each cell keeps the triangles it meets
     let all: Vec<u32> = (0..surface.triangles.len() as u32).collect();
-    let mut leaves: HashMap<Octant, bool> = HashMap::new(); // leaf -> crossed
+    let mut leaves: HashMap<Octant, bool> = HashMap::default(); // leaf -> crossed
     let mut stack = vec![(Octant { depth: 0, corner: [0; 3] }, all.clone())];
     while let Some((o, tris)) = stack.pop() {
         let (centre, half) = box_of(&o);
@@ -182,11 +212,15 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
         }
     }
     // keep the leaves the surface crosses and those inside
+    let columns = Columns::new(surface, finest * 4.0);
     let mut sorted: Vec<(Octant, bool)> = leaves.iter().map(|(o, c)| (*o, *c)).collect();
     sorted.sort();
     let mut report = OctreeReport { leaves_by_depth: vec![0; d as usize + 1], ..Default::default() };
-    let kept: Vec<Octant> =
-        sorted.iter().filter(|(o, crossed)| *crossed || inside(surface, &all, box_of(o).0)).map(|(o, _)| *o).collect();
+    let kept: Vec<Octant> = sorted
+        .iter()
+        .filter(|(o, crossed)| *crossed || inside(surface, columns.at(box_of(o).0), box_of(o).0))
+        .map(|(o, _)| *o)
+        .collect();
     report.crossing = sorted.iter().filter(|(_, c)| *c).count();
     report.dropped = sorted.len() - kept.len();
     let kept_set: HashSet<Octant> = kept.iter().copied().collect();
@@ -209,7 +243,7 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
     };
     // nodes: the corners of the kept leaves, and the corners of the squares
     // of split sides (a square's corner no kept leaf has still bounds it)
-    let mut node_ids: HashMap<[i64; 3], u32> = HashMap::new();
+    let mut node_ids: HashMap<[i64; 3], u32> = HashMap::default();
     let mut nodes: Vec<[f64; 3]> = Vec::new();
     let mut add = |c: [i64; 3], node_ids: &mut HashMap<[i64; 3], u32>| {
         node_ids.entry(c).or_insert_with(|| {
@@ -293,7 +327,7 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
         }
         cells.push(Cell::Polyhedron(faces));
     }
+    // (conforming by construction; a simulation validates it)
     let mesh = PolyMesh::from_cells(nodes, &cells)?;
-    mesh.validate()?;
     Ok((mesh, report))
 }
