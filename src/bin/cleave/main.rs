@@ -55,24 +55,26 @@ enum Command {
     },
 }
 
-fn set_threads(threads: Option<usize>) -> Result<(), String> {
-    if let Some(n) = threads {
-        if n == 0 {
-            return Err("--threads must be at least 1".into());
-        }
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| e.to_string())?;
+/// Runs `work` on a pool of `threads` workers (default: all cores). The
+/// work runs on a worker itself, so the engine's parallel loops start on
+/// the calling worker instead of handing every loop to the pool and
+/// sleeping until it is done (a context switch per loop, which cost a small
+/// body most of its step).
+fn in_pool<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> Result<T, String> {
+    if threads == Some(0) {
+        return Err("--threads must be at least 1".into());
     }
-    Ok(())
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
+    Ok(pool.install(work))
 }
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
         Command::Run { scene, out, steps, threads } => {
-            set_threads(threads)?;
             let loaded = LoadedScene::load(&scene).map_err(|e| e.to_string())?;
             let opts = RunOptions { out, steps };
             let dir = loaded.output_dir(&opts);
-            let summary = run_scene(&loaded, &opts).map_err(|e| e.to_string())?;
+            let summary = in_pool(threads, || run_scene(&loaded, &opts))?.map_err(|e| e.to_string())?;
             println!(
                 "{}: {} nodes, {} elements, {} step(s) in {:.3} s; max displacement {:.6e} m; output in {}",
                 scene.display(),
@@ -119,8 +121,7 @@ fn run(cli: Cli) -> Result<(), String> {
             }
         }
         Command::Bench { json, threads, quick, only } => {
-            set_threads(threads)?;
-            let report = bench::run_suite(quick, only).map_err(|e| e.to_string())?;
+            let report = in_pool(threads, || bench::run_suite(quick, only))?.map_err(|e| e.to_string())?;
             println!("{}", report.to_table());
             if let Some(path) = json {
                 let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
