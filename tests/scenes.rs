@@ -115,6 +115,11 @@ fn bad_input_ends_in_one_clear_error() {
     let sliced = |file: &str| {
         scene_with_mesh(file).replace("[material]", "[meshing]\nmethod = \"grid-slice\"\ncell = 0.3\n[material]")
     };
+    // `cleave info` checks a surface, and names the first problem
+    let (ok, out, err) = cleave(&["info", d.join("cube.obj").to_str().unwrap()]);
+    assert!(ok && out.contains("volume    1.000000000e0") && out.contains("no self-intersection: ok"), "{out}{err}");
+    let (ok, _, err) = cleave(&["info", d.join("open.obj").to_str().unwrap()]);
+    assert!(!ok && err.contains("open") && err.contains("edge"), "{err}");
     let err = run_fails(d, &scene_with_mesh("cube.obj"));
     assert!(err.contains("mesh.file") && err.contains("[meshing]"), "{err}");
     let err = run_fails(d, &sliced("open.obj"));

@@ -88,6 +88,10 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Command::Info { mesh } => {
+            let ext = mesh.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+            if matches!(ext.as_deref(), Some("obj" | "stl")) {
+                return surface_info(&mesh);
+            }
             let m = cleave::io::read_mesh(&mesh).map_err(|e| e.to_string())?;
             let (lo, hi) = m.bounding_box();
             println!("{}", mesh.display());
@@ -131,6 +135,33 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
     }
+}
+
+/// `cleave info` of a triangle surface: counts, the checks that make it
+/// bound a solid, and what was repaired.
+fn surface_info(path: &std::path::Path) -> Result<(), String> {
+    let raw = cleave::io::read_surface(path).map_err(|e| e.to_string())?;
+    println!("{}", path.display());
+    println!("  vertices  {}", raw.vertices.len());
+    println!("  triangles {}", raw.triangles.len());
+    let (lo, hi) = raw.bounding_box();
+    println!(
+        "  bbox      [{:.6e}, {:.6e}, {:.6e}] .. [{:.6e}, {:.6e}, {:.6e}]",
+        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+    );
+    let (_, report) = cleave::surface::prepare(&raw).map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("  closed, manifold, oriented, no self-intersection: ok");
+    println!("  components {}", report.components);
+    println!("  volume    {:.9e}", report.volume);
+    println!("  area      {:.9e}", report.area);
+    if report.merged_vertices > 0 || report.flipped_triangles > 0 {
+        println!(
+            "  repaired: {} duplicate vertices merged, {} triangles turned",
+            report.merged_vertices, report.flipped_triangles
+        );
+    }
+    println!("  mesh it with [meshing] method = \"grid-slice\" (cell) or \"octree\" (max_depth) in a scene");
+    Ok(())
 }
 
 fn main() -> ExitCode {
