@@ -18,6 +18,7 @@
 //! # Ok::<(), cleave::Error>(())
 //! ```
 
+mod bodies;
 mod body_force;
 mod boundary;
 mod corotation;
@@ -33,6 +34,7 @@ mod statics;
 mod step;
 mod timings;
 
+pub use bodies::{step_bodies, BodyError};
 pub use body_force::BodyForce;
 pub use boundary::{Collider, FixedRegion};
 pub use corotation::Corotation;

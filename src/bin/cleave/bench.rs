@@ -38,6 +38,9 @@ pub enum Group {
     /// Meshing surfaces (grid slicing, octree), embedded-surface updates
     /// and refinement steps.
     Meshing,
+    /// Small bodies: one step of bodies of 1 to 300 elements, and 256
+    /// bodies stepped together.
+    Bodies,
 }
 
 /// One measured stage.
@@ -218,6 +221,9 @@ pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Erro
     }
     if run(Group::Meshing) {
         out.extend(meshing_measurements(quick)?);
+    }
+    if run(Group::Bodies) {
+        out.extend(body_measurements(quick)?);
     }
     Ok(Report { threads: rayon::current_num_threads(), measurements: out })
 }
@@ -672,5 +678,59 @@ fn meshing_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
         best,
         Some(("split".into(), split as f64)),
     ));
+    Ok(out)
+}
+
+/// A small body dropping on a plane (mean value elements, Cholesky).
+fn small_body(mesh: PolyMesh) -> Result<Simulation, Error> {
+    let lowest = mesh.bounding_box().0;
+    let params = SimulationParams { gravity: [0.0, 0.0, -9.81], solver: SolverKind::Cholesky, ..Default::default() };
+    let mut sim = Simulation::new(mesh, params)?;
+    sim.add_collider(Collider::new([0.0, 0.0, lowest[2] - 0.05], [0.0, 0.1, 1.0], 1e6)?);
+    Ok(sim)
+}
+
+/// Microseconds per step of bodies of 1 (24 nodes), 8, 40 and 300
+/// elements, each alone (best of 5 runs of `steps` steps after a first
+/// one), and 256 bodies of 40 elements stepped together (body-steps per
+/// second in `extra`).
+fn body_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
+    let steps = if quick { 20 } else { 200 };
+    let single = element_with_vertices(24).ok_or_else(|| Error::Internal("no 24-vertex element".into()))?;
+    let bodies: Vec<(String, PolyMesh)> = vec![
+        ("1 element, 24 nodes".into(), single),
+        ("8 hexahedra".into(), box_hex([0.0; 3], [1.0; 3], [2, 2, 2])?),
+        ("40 hexahedra".into(), box_hex([0.0; 3], [1.0, 0.8, 0.4], [5, 4, 2])?),
+        ("300 hexahedra".into(), box_hex([0.0; 3], [2.0, 1.2, 1.0], [10, 6, 5])?),
+    ];
+    let mut out = Vec::new();
+    for (label, mesh) in bodies {
+        let mut sim = small_body(mesh)?;
+        sim.step()?;
+        let (ms, r) = best_ms(5, || (0..steps).try_for_each(|_| sim.step().map(|_| ())));
+        r?;
+        let ms = ms / steps as f64;
+        let mut m = mesh_row("step (small body)", label, sim.mesh(), ms, Some(("us/step".into(), 1e3 * ms)));
+        m.elements_per_s = sim.mesh().elements.len() as f64 / (ms * 1e-3);
+        out.push(m);
+    }
+    let count = if quick { 16 } else { 256 };
+    let mut set: Vec<Simulation> =
+        (0..count).map(|_| small_body(box_hex([0.0; 3], [1.0, 0.8, 0.4], [5, 4, 2])?)).collect::<Result<_, _>>()?;
+    cleave::sim::step_bodies(&mut set).map_err(|e| e.error)?;
+    let rounds = if quick { 2 } else { 10 };
+    let (ms, r) = best_ms(3, || (0..rounds).try_for_each(|_| cleave::sim::step_bodies(&mut set).map(|_| ())));
+    r.map_err(|e| e.error)?;
+    let body_steps = (count * rounds) as f64 / (ms * 1e-3);
+    let elements = set.iter().map(|s| s.mesh().elements.len()).sum::<usize>();
+    out.push(Measurement {
+        name: "bodies together".into(),
+        mesh: format!("{count} x 40 hexahedra"),
+        elements,
+        nodes: set.iter().map(|s| s.mesh().nodes.len()).sum(),
+        ms: ms / rounds as f64,
+        elements_per_s: elements as f64 * rounds as f64 / (ms * 1e-3),
+        extra: Some(("body-steps/s".into(), body_steps)),
+    });
     Ok(out)
 }
