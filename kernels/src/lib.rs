@@ -37,6 +37,7 @@ pub mod moments;
 pub mod polynomial;
 pub mod quadrature;
 pub mod rotation;
+pub mod solve4;
 pub mod spectrum;
 pub mod tet;
 pub mod vec3;

@@ -299,7 +299,7 @@ impl DgElements {
                     }
                 }
             }
-            let Some(sol) = solve4(a, rhs) else { continue };
+            let Some(sol) = cleave_kernels::solve4::solve4(a, rhs, 1e-300) else { continue };
             // u(x) = (u0 - B c) + B x, and x = Σ_a X⁰_a N_a
             let b: [[f64; 3]; 3] = std::array::from_fn(|k| std::array::from_fn(|l| sol[1 + l][k]));
             let shift: [f64; 3] = std::array::from_fn(|k| sol[0][k] - (0..3).map(|l| b[k][l] * c[l]).sum::<f64>());
@@ -542,36 +542,6 @@ impl DgElements {
         });
         self.boundary_forces = boundary_forces;
     }
-}
-
-/// Solves the 4 x 4 normal equations `a x = b` (three right-hand sides) by
-/// Gaussian elimination with partial pivoting; `None` when singular.
-fn solve4(mut a: [[f64; 4]; 4], mut b: [[f64; 3]; 4]) -> Option<[[f64; 3]; 4]> {
-    for col in 0..4 {
-        let pivot = (col..4).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if !(a[pivot][col].abs() > 1e-300) {
-            return None;
-        }
-        a.swap(col, pivot);
-        b.swap(col, pivot);
-        for row in col + 1..4 {
-            let factor = a[row][col] / a[col][col];
-            for k in col..4 {
-                a[row][k] -= factor * a[col][k];
-            }
-            for k in 0..3 {
-                b[row][k] -= factor * b[col][k];
-            }
-        }
-    }
-    let mut x = [[0.0; 3]; 4];
-    for row in (0..4).rev() {
-        for k in 0..3 {
-            let s: f64 = (row + 1..4).map(|j| a[row][j] * x[j][k]).sum();
-            x[row][k] = (b[row][k] - s) / a[row][row];
-        }
-    }
-    Some(x)
 }
 
 impl Couplings for DgElements {

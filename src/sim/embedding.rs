@@ -66,35 +66,6 @@ fn spacings(mesh: &PolyMesh) -> Vec<f64> {
     sum.iter().zip(&count).map(|(s, &c)| if c > 0 { s / c as f64 } else { mean }).collect()
 }
 
-/// Solves the symmetric 4 x 4 system `a c = e₀` by Gaussian elimination
-/// with partial pivoting; `None` when `a` is (nearly) singular relative to
-/// its diagonal.
-fn first_column_of_inverse(mut a: [[f64; 4]; 4]) -> Option<[f64; 4]> {
-    let scale = (0..4).map(|i| a[i][i].abs()).fold(0.0, f64::max);
-    let mut b = [1.0, 0.0, 0.0, 0.0];
-    for col in 0..4 {
-        let pivot = (col..4).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if !(a[pivot][col].abs() > 1e-10 * scale) {
-            return None;
-        }
-        a.swap(col, pivot);
-        b.swap(col, pivot);
-        for row in col + 1..4 {
-            let f = a[row][col] / a[col][col];
-            for k in col..4 {
-                a[row][k] -= f * a[col][k];
-            }
-            b[row] -= f * b[col];
-        }
-    }
-    let mut x = [0.0; 4];
-    for row in (0..4).rev() {
-        let s: f64 = (row + 1..4).map(|j| a[row][j] * x[j]).sum();
-        x[row] = (b[row] - s) / a[row][row];
-    }
-    Some(x)
-}
-
 /// The MLS shape functions of `points` over the mesh nodes: a point map
 /// from nodes to points (see the module docs). A point where no four
 /// nodes in reach span space even with the reach grown eight times is an
@@ -146,8 +117,12 @@ pub fn mls_map(mesh: &PolyMesh, points: &[[f64; 3]]) -> Result<PointMap, ParamEr
                     }
                 }
             }
-            // p(x) centred on x is e₀: φ_i = θ_i e₀ᵀ A⁻¹ q_i
-            if let Some(c) = first_column_of_inverse(a).filter(|_| near.len() >= 4) {
+            // p(x) centred on x is e₀: φ_i = θ_i e₀ᵀ A⁻¹ q_i, with A⁻¹ e₀
+            // refused when A is (nearly) singular relative to its diagonal
+            let scale = (0..4).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+            let e0 = [[1.0], [0.0], [0.0], [0.0]];
+            let column = cleave_kernels::solve4::solve4(a, e0, 1e-10 * scale).map(|x| x.map(|r| r[0]));
+            if let Some(c) = column.filter(|_| near.len() >= 4) {
                 for (i, w, q) in &near {
                     map.blocks.push(*i);
                     map.weights.push(w * (c[0] * q[0] + c[1] * q[1] + c[2] * q[2] + c[3] * q[3]));
