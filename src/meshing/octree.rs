@@ -42,6 +42,16 @@ struct Octant {
     corner: [i64; 3],
 }
 
+/// The eight corners of the cube at `corner` with edge `u` (finest units),
+/// in binary order (x fastest): also the corners of its children of edge
+/// `u` when `u` is half the cube's.
+fn cube_corners(corner: [i64; 3], u: i64) -> [[i64; 3]; 8] {
+    std::array::from_fn(|k| {
+        let k = k as i64;
+        [corner[0] + u * (k & 1), corner[1] + u * ((k >> 1) & 1), corner[2] + u * ((k >> 2) & 1)]
+    })
+}
+
 /// Whether triangle `t` overlaps the box `centre ± half` (separating axis
 /// test: the box's axes, the triangle's normal and the nine edge crosses).
 fn triangle_meets_box(t: [[f64; 3]; 3], centre: [f64; 3], half: f64) -> bool {
@@ -148,10 +158,7 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
             leaves.insert(o, !met.is_empty());
             continue;
         }
-        let u = units(o.depth + 1);
-        for k in 0..8i64 {
-            let corner =
-                [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)];
+        for corner in cube_corners(o.corner, units(o.depth + 1)) {
             stack.push((Octant { depth: o.depth + 1, corner }, met.clone()));
         }
     }
@@ -196,10 +203,7 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
         split.dedup();
         for o in split {
             let Some(crossed) = leaves.remove(&o) else { continue };
-            let u = units(o.depth + 1);
-            for k in 0..8i64 {
-                let corner =
-                    [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)];
+            for corner in cube_corners(o.corner, units(o.depth + 1)) {
                 let child = Octant { depth: o.depth + 1, corner };
                 let (centre, half) = box_of(&child);
                 let meets = crossed
@@ -254,11 +258,8 @@ pub fn octree(surface: &Surface, max_depth: usize) -> Result<(PolyMesh, OctreeRe
     let mut splits: Vec<[bool; 6]> = Vec::with_capacity(kept.len());
     for o in &kept {
         let u = units(o.depth);
-        for k in 0..8i64 {
-            add(
-                [o.corner[0] + u * (k & 1), o.corner[1] + u * ((k >> 1) & 1), o.corner[2] + u * ((k >> 2) & 1)],
-                &mut node_ids,
-            );
+        for c in cube_corners(o.corner, u) {
+            add(c, &mut node_ids);
         }
         let mut sides = [false; 6];
         for a in 0..3 {
