@@ -162,8 +162,8 @@ impl Simulation {
             chosen.iter().flat_map(|c| self.mesh.elements[c.0 as usize].nodes.iter().copied()).collect();
         let rollback = Rollback::around_nodes(&self.mesh, &nodes);
         let nodes_before = self.mesh.nodes.len();
-        let mut split = SplitReport::default();
         let outcome = (|| {
+            let mut split = SplitReport::default();
             for &(e, centre, direction) in &chosen {
                 let normals: &[[f64; 3]] = match rule.split {
                     RefineSplit::Halves => &[direction],
@@ -179,13 +179,18 @@ impl Simulation {
             self.mesh.check_elements(&list, &ValidationOptions::default())?;
             // (the report's plane names the first split; nothing reads it)
             let plane = Plane { point: chosen[0].1, normal: chosen[0].2 };
-            let cut = CutReport::new(&self.mesh, plane, nodes_before, split.clone(), Vec::new(), touched);
-            self.apply_cut(&PolygonCutReport { cut, pocket: None })
+            let cut = CutReport::new(&self.mesh, plane, nodes_before, split, Vec::new(), touched);
+            let applied = PolygonCutReport { cut, pocket: None };
+            self.apply_cut(&applied)?;
+            Ok(applied.cut.split)
         })();
-        if let Err(e) = outcome {
-            rollback.restore(&mut self.mesh);
-            return Err(e);
-        }
+        let split = match outcome {
+            Ok(split) => split,
+            Err(e) => {
+                rollback.restore(&mut self.mesh);
+                return Err(e);
+            }
+        };
         // parts inherit their parent's level, one up (in split order, so
         // the parts of parts follow their parents)
         self.refine_levels.resize(self.mesh.elements.len(), 0);
