@@ -19,14 +19,19 @@
 //! Data layout: per batch of `n` elements with `k` nodes each, `nodes[e k +
 //! a]` indexes the positions `x`, `grads[e k + a]` and `rest[e k + a]` are
 //! per element node, matrices are row-major `[f64; 9]`, `K_e` row-major
-//! `3k x 3k` per element. Each kernel is written once over [`Real`]: the
-//! scalar reference runs it on `f64`, the fast path on [`Lanes`] over
-//! elements (or over the blocks of a column), with the same operations in
-//! the same order, so both agree to the bit on every instruction set.
+//! `3k x 3k` per element.
+//!
+//! These kernels run as plain `f64` code, element after element. They used
+//! to run on SIMD lanes over elements too (the formulas are written over
+//! [`Real`]), but with this layout every lane value is gathered from a
+//! different element, and the packing cost more than the lanes saved:
+//! measured per element on an AVX-512 machine, the lane versions took 2.2x
+//! (forces, `k` = 4 to 20), 3.5x (tetrahedron forces), 5x (deformation
+//! gradients) and, per warped block, 3.5x the time of this code. Lanes pay
+//! where the arithmetic per gathered value is large: the polar
+//! decomposition ([`crate::rotation`]) keeps them (7.5x faster).
 
-use pulp::Simd;
-
-use crate::lanes::{Lanes, Real};
+use crate::lanes::Real;
 
 /// `Σ_a v_a ⊗ g_a` (row-major): `v` the `k` nodal values, `g` their
 /// gradients.
@@ -128,6 +133,29 @@ fn warped<R: Real>(r: &[R; 9], k: &[R; 9], scale: R) -> [R; 9] {
 /// per-element arrays live on the stack).
 pub const MAX_NODES: usize = 256;
 
+/// Runs `$body` with a constant `$n` that holds `$k` nodes: 8, 32 or
+/// [`MAX_NODES`], so that per-node stack arrays of small elements are small
+/// (zeroing room for 256 nodes of AVX-512 lanes cost more than the
+/// arithmetic of a hexahedron).
+macro_rules! with_room {
+    ($k:expr, $n:ident => $body:expr) => {
+        match $k {
+            0..=8 => {
+                const $n: usize = 8;
+                $body
+            }
+            9..=32 => {
+                const $n: usize = 32;
+                $body
+            }
+            _ => {
+                const $n: usize = MAX_NODES;
+                $body
+            }
+        }
+    };
+}
+
 /// `f = -R K (Rᵀ x - X)` of one element with `k` nodes (see the module
 /// docs); `u` is scratch of `k` values.
 #[inline(always)]
@@ -165,144 +193,25 @@ fn check(k: usize, n: usize, nodes: &[u32], per_node: usize) {
     assert_eq!(per_node, n * k, "per-node arrays must hold k per element");
 }
 
-/// Scalar reference of [`deformation_gradients`].
-pub fn deformation_gradients_scalar(k: usize, nodes: &[u32], x: &[[f64; 3]], grads: &[[f64; 3]], out: &mut [[f64; 9]]) {
-    check(k, out.len(), nodes, grads.len());
-    let mut v = [[0.0; 3]; MAX_NODES];
-    for (e, f) in out.iter_mut().enumerate() {
-        for a in 0..k {
-            v[a] = x[nodes[e * k + a] as usize];
-        }
-        *f = field_gradient(&v[..k], &grads[e * k..(e + 1) * k]);
-    }
-}
-
-/// Packs `WIDTH` elements' values (the last group padded with its first
-/// element) into lanes.
-#[inline(always)]
-fn pack<S: Simd, const N: usize>(simd: S, width: usize, value: impl Fn(usize, usize) -> f64) -> [Lanes<S>; N] {
-    std::array::from_fn(|c| {
-        let mut lanes = [0.0f64; 16];
-        for (l, slot) in lanes.iter_mut().enumerate().take(width) {
-            *slot = value(l, c);
-        }
-        Lanes::load(simd, &lanes[..width])
-    })
-}
-
-/// Stores lanes `c` of `values` into `out(l, c)` for the first `n` lanes.
-#[inline(always)]
-fn unpack<S: Simd, const N: usize>(
-    values: [Lanes<S>; N],
-    width: usize,
-    n: usize,
-    mut out: impl FnMut(usize, usize, f64),
-) {
-    for (c, lane) in values.iter().enumerate() {
-        let mut lanes = [0.0f64; 16];
-        lane.store(&mut lanes[..width]);
-        for (l, &v) in lanes.iter().enumerate().take(n) {
-            out(l, c, v);
-        }
-    }
-}
-
-struct Gradients<'a> {
-    k: usize,
-    nodes: &'a [u32],
-    x: &'a [[f64; 3]],
-    grads: &'a [[f64; 3]],
-    out: &'a mut [[f64; 9]],
-}
-
-impl pulp::WithSimd for Gradients<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Gradients { k, nodes, x, grads, out } = self;
-        let width = Lanes::<S>::WIDTH;
-        let z = Lanes::splat(simd, 0.0);
-        let mut v = [[z; 3]; MAX_NODES];
-        let mut g = [[z; 3]; MAX_NODES];
-        for e0 in (0..out.len()).step_by(width) {
-            let n = width.min(out.len() - e0);
-            let element = |l: usize| e0 + if l < n { l } else { 0 };
-            for a in 0..k {
-                v[a] = pack(simd, width, |l, c| x[nodes[element(l) * k + a] as usize][c]);
-                g[a] = pack(simd, width, |l, c| grads[element(l) * k + a][c]);
-            }
-            let f = field_gradient(&v[..k], &g[..k]);
-            unpack(f, width, n, |l, c, val| out[e0 + l][c] = val);
-        }
-    }
-}
-
 /// The deformation gradient `F = Σ_a x[nodes[e k + a]] ⊗ grads[e k + a]`
-/// of every element of a batch (layout in the module docs), SIMD over
-/// elements; bitwise equal to [`deformation_gradients_scalar`].
+/// of every element of a batch (layout in the module docs).
 pub fn deformation_gradients(k: usize, nodes: &[u32], x: &[[f64; 3]], grads: &[[f64; 3]], out: &mut [[f64; 9]]) {
     check(k, out.len(), nodes, grads.len());
     assert!(k <= MAX_NODES, "at most {MAX_NODES} nodes per element");
-    pulp::Arch::new().dispatch(Gradients { k, nodes, x, grads, out });
-}
-
-/// Scalar reference of [`tet_forces`].
-#[allow(clippy::too_many_arguments)]
-pub fn tet_forces_scalar(
-    rotations: &[[f64; 9]],
-    gradients: &[[f64; 9]],
-    grads: &[[f64; 3]],
-    volumes: &[f64],
-    lambda: f64,
-    mu: f64,
-    forces: &mut [[f64; 3]],
-    rotated: &mut [[f64; 3]],
-) {
-    for e in 0..volumes.len() {
-        let g = [grads[4 * e], grads[4 * e + 1], grads[4 * e + 2], grads[4 * e + 3]];
-        let (f, rg) = tet_element(&rotations[e], &gradients[e], &g, volumes[e], lambda, mu);
-        forces[4 * e..4 * e + 4].copy_from_slice(&f);
-        rotated[4 * e..4 * e + 4].copy_from_slice(&rg);
-    }
-}
-
-struct TetForces<'a> {
-    rotations: &'a [[f64; 9]],
-    gradients: &'a [[f64; 9]],
-    grads: &'a [[f64; 3]],
-    volumes: &'a [f64],
-    lame: (f64, f64),
-    forces: &'a mut [[f64; 3]],
-    rotated: &'a mut [[f64; 3]],
-}
-
-impl pulp::WithSimd for TetForces<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let TetForces { rotations, gradients, grads, volumes, lame, forces, rotated } = self;
-        let width = Lanes::<S>::WIDTH;
-        let (lambda, mu) = (Lanes::splat(simd, lame.0), Lanes::splat(simd, lame.1));
-        for e0 in (0..volumes.len()).step_by(width) {
-            let n = width.min(volumes.len() - e0);
-            let element = |l: usize| e0 + if l < n { l } else { 0 };
-            let r: [Lanes<S>; 9] = pack(simd, width, |l, c| rotations[element(l)][c]);
-            let f: [Lanes<S>; 9] = pack(simd, width, |l, c| gradients[element(l)][c]);
-            let g: [[Lanes<S>; 3]; 4] = std::array::from_fn(|a| pack(simd, width, |l, c| grads[4 * element(l) + a][c]));
-            let [vol]: [Lanes<S>; 1] = pack(simd, width, |l, _| volumes[element(l)]);
-            let (fo, rg) = tet_element(&r, &f, &g, vol, lambda, mu);
-            for a in 0..4 {
-                unpack(fo[a], width, n, |l, c, v| forces[4 * (e0 + l) + a][c] = v);
-                unpack(rg[a], width, n, |l, c, v| rotated[4 * (e0 + l) + a][c] = v);
+    with_room!(k, N => {
+        let mut v = [[0.0; 3]; N];
+        for (e, f) in out.iter_mut().enumerate() {
+            for a in 0..k {
+                v[a] = x[nodes[e * k + a] as usize];
             }
+            *f = field_gradient(&v[..k], &grads[e * k..(e + 1) * k]);
         }
-    }
+    })
 }
 
 /// Forces `-V R σ g_a` (N) and rotated gradients `R g_a` (1/m) of every
 /// tetrahedron of a batch, from its rotation, deformation gradient,
-/// gradients (4 per element) and volume (m³), SIMD over elements; bitwise
-/// equal to [`tet_forces_scalar`].
+/// gradients (4 per element) and volume (m³).
 #[allow(clippy::too_many_arguments)]
 pub fn tet_forces(
     rotations: &[[f64; 9]],
@@ -317,83 +226,17 @@ pub fn tet_forces(
     let n = volumes.len();
     assert!(rotations.len() == n && gradients.len() == n, "one rotation and gradient per element");
     assert!(grads.len() == 4 * n && forces.len() == 4 * n && rotated.len() == 4 * n, "four per element");
-    pulp::Arch::new().dispatch(TetForces { rotations, gradients, grads, volumes, lame: (lambda, mu), forces, rotated });
-}
-
-/// Scalar reference of [`element_forces_batch`].
-pub fn element_forces_scalar(
-    k: usize,
-    nodes: &[u32],
-    x: &[[f64; 3]],
-    rest: &[[f64; 3]],
-    stiffness: &[f64],
-    rotations: &[[f64; 9]],
-    forces: &mut [[f64; 3]],
-) {
-    check(k, rotations.len(), nodes, rest.len());
-    let n = 3 * k;
-    let mut xe = [[0.0; 3]; MAX_NODES];
-    let mut u = [[0.0; 3]; MAX_NODES];
-    for (e, r) in rotations.iter().enumerate() {
-        for a in 0..k {
-            xe[a] = x[nodes[e * k + a] as usize];
-        }
-        let ke = &stiffness[e * n * n..(e + 1) * n * n];
-        element_forces(
-            r,
-            |row, col| ke[row * n + col],
-            &xe[..k],
-            &rest[e * k..(e + 1) * k],
-            &mut u[..k],
-            &mut forces[e * k..(e + 1) * k],
-        );
-    }
-}
-
-struct ElementForces<'a> {
-    k: usize,
-    nodes: &'a [u32],
-    x: &'a [[f64; 3]],
-    rest: &'a [[f64; 3]],
-    stiffness: &'a [f64],
-    rotations: &'a [[f64; 9]],
-    forces: &'a mut [[f64; 3]],
-}
-
-impl pulp::WithSimd for ElementForces<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let ElementForces { k, nodes, x, rest, stiffness, rotations, forces } = self;
-        let width = Lanes::<S>::WIDTH;
-        let n3 = 3 * k;
-        let z = Lanes::splat(simd, 0.0);
-        let (mut xe, mut re, mut u, mut out) =
-            ([[z; 3]; MAX_NODES], [[z; 3]; MAX_NODES], [[z; 3]; MAX_NODES], [[z; 3]; MAX_NODES]);
-        for e0 in (0..rotations.len()).step_by(width) {
-            let n = width.min(rotations.len() - e0);
-            let element = |l: usize| e0 + if l < n { l } else { 0 };
-            let r: [Lanes<S>; 9] = pack(simd, width, |l, c| rotations[element(l)][c]);
-            for a in 0..k {
-                xe[a] = pack(simd, width, |l, c| x[nodes[element(l) * k + a] as usize][c]);
-                re[a] = pack(simd, width, |l, c| rest[element(l) * k + a][c]);
-            }
-            let ke = |row: usize, col: usize| -> Lanes<S> {
-                let [v] = pack(simd, width, |l, _| stiffness[element(l) * n3 * n3 + row * n3 + col]);
-                v
-            };
-            element_forces(&r, ke, &xe[..k], &re[..k], &mut u[..k], &mut out[..k]);
-            for (a, fa) in out.iter().enumerate().take(k) {
-                unpack(*fa, width, n, |l, c, v| forces[(e0 + l) * k + a][c] = v);
-            }
-        }
+    for e in 0..n {
+        let g = [grads[4 * e], grads[4 * e + 1], grads[4 * e + 2], grads[4 * e + 3]];
+        let (f, rg) = tet_element(&rotations[e], &gradients[e], &g, volumes[e], lambda, mu);
+        forces[4 * e..4 * e + 4].copy_from_slice(&f);
+        rotated[4 * e..4 * e + 4].copy_from_slice(&rg);
     }
 }
 
 /// Elastic forces `f_e = -R K_e (Rᵀ x_e - X_e)` (N) of every element of a
 /// batch with `k` nodes (layout in the module docs; `stiffness` holds
-/// `9 k²` values per element), SIMD over elements; bitwise equal to
-/// [`element_forces_scalar`].
+/// `9 k²` values per element).
 pub fn element_forces_batch(
     k: usize,
     nodes: &[u32],
@@ -406,11 +249,32 @@ pub fn element_forces_batch(
     check(k, rotations.len(), nodes, rest.len());
     assert!(k <= MAX_NODES, "at most {MAX_NODES} nodes per element");
     assert_eq!(stiffness.len(), rotations.len() * 9 * k * k, "9 k² stiffness values per element");
-    pulp::Arch::new().dispatch(ElementForces { k, nodes, x, rest, stiffness, rotations, forces });
+    let n = 3 * k;
+    with_room!(k, N => {
+        let mut xe = [[0.0; 3]; N];
+        let mut u = [[0.0; 3]; N];
+        for (e, r) in rotations.iter().enumerate() {
+            for a in 0..k {
+                xe[a] = x[nodes[e * k + a] as usize];
+            }
+            let ke = &stiffness[e * n * n..(e + 1) * n * n];
+            element_forces(
+                r,
+                |row, col| ke[row * n + col],
+                &xe[..k],
+                &rest[e * k..(e + 1) * k],
+                &mut u[..k],
+                &mut forces[e * k..(e + 1) * k],
+            );
+        }
+    })
 }
 
-/// Scalar reference of [`warped_column`].
-pub fn warped_column_scalar(r: &[f64; 9], stiffness: &[f64], k: usize, b: usize, scale: f64, out: &mut [[f64; 9]]) {
+/// The warped blocks `scale R K_ab Rᵀ` (N/m, row-major) of one element for
+/// every node `a` and the given node `b`, from its `3k x 3k` stiffness.
+pub fn warped_column(r: &[f64; 9], stiffness: &[f64], k: usize, b: usize, scale: f64, out: &mut [[f64; 9]]) {
+    assert_eq!(stiffness.len(), 9 * k * k, "K_e must be 3k x 3k");
+    assert!(out.len() >= k && b < k, "one block per node");
     let n = 3 * k;
     for (a, o) in out.iter_mut().enumerate().take(k) {
         let kab: [f64; 9] = std::array::from_fn(|rc| stiffness[(3 * a + rc / 3) * n + 3 * b + rc % 3]);
@@ -418,49 +282,10 @@ pub fn warped_column_scalar(r: &[f64; 9], stiffness: &[f64], k: usize, b: usize,
     }
 }
 
-struct WarpedColumn<'a> {
-    r: &'a [f64; 9],
-    stiffness: &'a [f64],
-    k: usize,
-    b: usize,
-    scale: f64,
-    out: &'a mut [[f64; 9]],
-}
-
-impl pulp::WithSimd for WarpedColumn<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let WarpedColumn { r, stiffness, k, b, scale, out } = self;
-        let width = Lanes::<S>::WIDTH;
-        let n3 = 3 * k;
-        let rl: [Lanes<S>; 9] = std::array::from_fn(|c| Lanes::splat(simd, r[c]));
-        let s = Lanes::splat(simd, scale);
-        for a0 in (0..k).step_by(width) {
-            let n = width.min(k - a0);
-            let block = |l: usize| a0 + if l < n { l } else { 0 };
-            let kab: [Lanes<S>; 9] =
-                pack(simd, width, |l, rc| stiffness[(3 * block(l) + rc / 3) * n3 + 3 * b + rc % 3]);
-            let w = warped(&rl, &kab, s);
-            unpack(w, width, n, |l, c, v| out[a0 + l][c] = v);
-        }
-    }
-}
-
-/// The warped blocks `scale R K_ab Rᵀ` (N/m, row-major) of one element for
-/// every node `a` and the given node `b`, from its `3k x 3k` stiffness,
-/// SIMD over `a`; bitwise equal to [`warped_column_scalar`].
-pub fn warped_column(r: &[f64; 9], stiffness: &[f64], k: usize, b: usize, scale: f64, out: &mut [[f64; 9]]) {
-    assert_eq!(stiffness.len(), 9 * k * k, "K_e must be 3k x 3k");
-    assert!(out.len() >= k && b < k, "one block per node");
-    pulp::Arch::new().dispatch(WarpedColumn { r, stiffness, k, b, scale, out });
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::elasticity::block;
-    use crate::lanes::levels;
 
     fn rotation(t: f64) -> [f64; 9] {
         let q = [(0.5 * t).cos(), 0.3 * (0.5 * t).sin(), 0.8 * (0.5 * t).sin(), 0.52 * (0.5 * t).sin()];
@@ -479,8 +304,7 @@ mod tests {
         rotations: Vec<[f64; 9]>,
     }
 
-    /// A batch of 11 elements with 5 nodes each (more than any lane width,
-    /// not a multiple of it) over 30 positions.
+    /// A batch of 11 elements with 5 nodes each over 30 positions.
     fn batch() -> Batch {
         let (k, n) = (5, 11);
         let nodes: Vec<u32> = (0..n * k).map(|i| ((i * 7 + 3) % 30) as u32).collect();
@@ -494,59 +318,54 @@ mod tests {
         Batch { k, nodes, x, grads, rest, stiffness, rotations }
     }
 
+    /// The batched kernels against the formulas written out with dense
+    /// matrices, element by element.
     #[test]
-    fn every_kernel_matches_its_scalar_reference_bitwise_on_every_level() {
+    fn batched_kernels_match_the_formulas_element_by_element() {
         let Batch { k, nodes, x, grads, rest, stiffness, rotations } = batch();
         let n = rotations.len();
-        let mut want_f = vec![[0.0; 9]; n];
-        deformation_gradients_scalar(k, &nodes, &x, &grads, &mut want_f);
-        let mut want_forces = vec![[0.0; 3]; n * k];
-        element_forces_scalar(k, &nodes, &x, &rest, &stiffness, &rotations, &mut want_forces);
-        let tet_grads: Vec<[f64; 3]> = grads[..4 * n].to_vec();
-        let volumes: Vec<f64> = (0..n).map(|e| 0.1 + 0.01 * e as f64).collect();
-        let (mut want_tf, mut want_rg) = (vec![[0.0; 3]; 4 * n], vec![[0.0; 3]; 4 * n]);
-        tet_forces_scalar(&rotations, &want_f, &tet_grads, &volumes, 2e5, 7e4, &mut want_tf, &mut want_rg);
-        let mut want_col = vec![[0.0; 9]; k];
-        warped_column_scalar(&rotations[3], &stiffness[3 * 9 * k * k..4 * 9 * k * k], k, 2, 0.7, &mut want_col);
-        for level in levels::available("corotation") {
-            let mut f = vec![[0.0; 9]; n];
-            levels::run(level, Gradients { k, nodes: &nodes, x: &x, grads: &grads, out: &mut f });
-            assert_eq!(f, want_f, "{level:?}: deformation gradients");
-            let mut forces = vec![[0.0; 3]; n * k];
-            let op = ElementForces {
-                k,
-                nodes: &nodes,
-                x: &x,
-                rest: &rest,
-                stiffness: &stiffness,
-                rotations: &rotations,
-                forces: &mut forces,
-            };
-            levels::run(level, op);
-            assert_eq!(forces, want_forces, "{level:?}: element forces");
-            let (mut tf, mut rg) = (vec![[0.0; 3]; 4 * n], vec![[0.0; 3]; 4 * n]);
-            let op = TetForces {
-                rotations: &rotations,
-                gradients: &want_f,
-                grads: &tet_grads,
-                volumes: &volumes,
-                lame: (2e5, 7e4),
-                forces: &mut tf,
-                rotated: &mut rg,
-            };
-            levels::run(level, op);
-            assert_eq!((tf, rg), (want_tf.clone(), want_rg.clone()), "{level:?}: tetrahedron forces");
-            let mut col = vec![[0.0; 9]; k];
-            let op = WarpedColumn {
-                r: &rotations[3],
-                stiffness: &stiffness[3 * 9 * k * k..4 * 9 * k * k],
-                k,
-                b: 2,
-                scale: 0.7,
-                out: &mut col,
-            };
-            levels::run(level, op);
-            assert_eq!(col, want_col, "{level:?}: warped blocks");
+        let (mut f, mut forces) = (vec![[0.0; 9]; n], vec![[0.0; 3]; n * k]);
+        deformation_gradients(k, &nodes, &x, &grads, &mut f);
+        element_forces_batch(k, &nodes, &x, &rest, &stiffness, &rotations, &mut forces);
+        let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale;
+        for e in 0..n {
+            let xe = |a: usize| x[nodes[e * k + a] as usize];
+            for (rc, &got) in f[e].iter().enumerate() {
+                let want: f64 = (0..k).map(|a| xe(a)[rc / 3] * grads[e * k + a][rc % 3]).sum();
+                assert!(close(got, want, 10.0), "F of element {e}");
+            }
+            let r = &rotations[e];
+            let ke = &stiffness[e * 9 * k * k..(e + 1) * 9 * k * k];
+            // u = Rᵀ x - X, then f = -R K u
+            let u: Vec<f64> = (0..3 * k)
+                .map(|i| (0..3).map(|p| r[3 * p + i % 3] * xe(i / 3)[p]).sum::<f64>() - rest[e * k + i / 3][i % 3])
+                .collect();
+            let ku: Vec<f64> = (0..3 * k).map(|i| (0..3 * k).map(|j| ke[i * 3 * k + j] * u[j]).sum()).collect();
+            let scale = ku.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for a in 0..k {
+                for p in 0..3 {
+                    let want = -(0..3).map(|q| r[3 * p + q] * ku[3 * a + q]).sum::<f64>();
+                    assert!(close(forces[e * k + a][p], want, scale), "force on node {a} of element {e}");
+                }
+            }
+        }
+        // warped blocks R K_ab Rᵀ of one element's column b = 2
+        let (e, b, scale) = (3, 2, 0.7);
+        let ke = &stiffness[e * 9 * k * k..(e + 1) * 9 * k * k];
+        let mut col = vec![[0.0; 9]; k];
+        warped_column(&rotations[e], ke, k, b, scale, &mut col);
+        let r = &rotations[e];
+        for (a, blk) in col.iter().enumerate() {
+            let kab = |p: usize, q: usize| ke[(3 * a + p) * 3 * k + 3 * b + q];
+            for p in 0..3 {
+                for q in 0..3 {
+                    let want: f64 = (0..3)
+                        .flat_map(|s| (0..3).map(move |t| (s, t)))
+                        .map(|(s, t)| r[3 * p + s] * kab(s, t) * r[3 * q + t])
+                        .sum();
+                    assert!(close(blk[3 * p + q], scale * want, 1e5), "warped block {a}");
+                }
+            }
         }
     }
 
@@ -560,9 +379,9 @@ mod tests {
         let moved: Vec<[f64; 3]> = x.iter().map(|p| mat_vec(&r, *p)).collect();
         let nodes = [0u32, 1, 2, 3];
         let mut f = [[0.0; 9]];
-        deformation_gradients_scalar(4, &nodes, &moved, &g, &mut f);
+        deformation_gradients(4, &nodes, &moved, &g, &mut f);
         let (mut forces, mut rotated) = ([[0.0; 3]; 4], [[0.0; 3]; 4]);
-        tet_forces_scalar(&[r], &f, &g, &[v.abs()], 2e5, 7e4, &mut forces, &mut rotated);
+        tet_forces(&[r], &f, &g, &[v.abs()], 2e5, 7e4, &mut forces, &mut rotated);
         assert!(forces.iter().flatten().all(|c| c.abs() < 1e-9), "{forces:?}");
         let (l, m) = (2e5, 7e4);
         let k = block(g[0], g[2], v.abs(), l, m);

@@ -152,11 +152,12 @@ impl pulp::WithSimd for Polar<'_> {
         let mut most = 0;
         let mut fl = [[0.0f64; 16]; 9];
         let mut ql = [[0.0f64; 16]; 4];
-        for e0 in (0..self.f.len()).step_by(width) {
-            let n = width.min(self.f.len() - e0);
+        // whole lane groups here, the rest by the scalar reference (the two
+        // agree to the bit)
+        let full = self.f.len() - self.f.len() % width;
+        for e0 in (0..full).step_by(width) {
             for l in 0..width {
-                // pad with the group's first element
-                let e = e0 + if l < n { l } else { 0 };
+                let e = e0 + l;
                 for c in 0..9 {
                     fl[c][l] = self.f[e][c];
                 }
@@ -171,11 +172,11 @@ impl pulp::WithSimd for Polar<'_> {
             for (c, lane) in r.iter().enumerate() {
                 lane.store(&mut ql[c][..width]);
             }
-            for l in 0..n {
+            for l in 0..width {
                 self.q[e0 + l] = [ql[0][l], ql[1][l], ql[2][l], ql[3][l]];
             }
         }
-        most
+        most.max(polar_rotations_scalar(&self.f[full..], &mut self.q[full..]))
     }
 }
 

@@ -101,9 +101,9 @@ impl BatchState {
                 .max()
                 .unwrap_or(0);
             self.rotation[range.clone()]
-                .par_iter_mut()
-                .zip(&self.quaternion[range.clone()])
-                .for_each(|(r, q)| *r = rotation_matrix(*q));
+                .par_chunks_mut(TASK)
+                .zip(self.quaternion[range.clone()].par_chunks(TASK))
+                .for_each(|(r, q)| r.iter_mut().zip(q).for_each(|(r, q)| *r = rotation_matrix(*q)));
         }
         // 3. forces (and rotated gradients of tetrahedra), SIMD over elements
         let (rotation, gradient) = (&self.rotation[range.clone()], &self.gradient[range.clone()]);

@@ -323,7 +323,7 @@ impl Batch {
         let k = self.k;
         let mut f = [[0.0; 9]];
         let (nodes, grads) = (&self.nodes[i * k..(i + 1) * k], &self.stress_grads[i * k..(i + 1) * k]);
-        cleave_kernels::corotation::deformation_gradients_scalar(k, nodes, v, grads, &mut f);
+        cleave_kernels::corotation::deformation_gradients(k, nodes, v, grads, &mut f);
         f[0]
     }
 
