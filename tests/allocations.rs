@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use cleave::material::Material;
 use cleave::mesh::Plane;
-use cleave::meshing::box_tet;
-use cleave::sim::{Collider, FixedRegion, Simulation, SimulationParams};
+use cleave::meshing::{box_tet, random_convex};
+use cleave::sim::{step_bodies, Collider, FixedRegion, Simulation, SimulationParams, StepStats};
 use cleave::solve::SolverKind;
 
 /// Counts allocations (and reallocations) of marked threads while
@@ -51,6 +51,10 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
 
+/// Held by each test: the counter is global, so the tests of this file
+/// take turns.
+static ONE_TEST_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Allocations made by `f` on the marked threads.
 fn allocations_of(f: impl FnOnce()) -> usize {
     ALLOCATIONS.store(0, Ordering::SeqCst);
@@ -81,13 +85,16 @@ fn body(solver: SolverKind) -> Simulation {
 
 #[test]
 fn a_step_allocates_nothing_after_the_first() {
+    let _turn = ONE_TEST_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let pool =
         rayon::ThreadPoolBuilder::new().num_threads(2).start_handler(|_| MARKED.with(|m| m.set(true))).build().unwrap();
     MARKED.with(|m| m.set(true));
     // the counter sees an allocation on the pool's threads
     let one = pool.install(|| allocations_of(|| drop(std::hint::black_box(Vec::<u64>::with_capacity(8)))));
     assert_eq!(one, 1, "the counting allocator counts");
-    for solver in [SolverKind::Cholesky, SolverKind::Cg, SolverKind::CgRest] {
+    // 112 nodes: Cholesky factorises in the envelope, SparseCholesky as
+    // sparse supernodal
+    for solver in [SolverKind::Cholesky, SolverKind::SparseCholesky, SolverKind::Cg, SolverKind::CgRest] {
         let mut sim = body(solver);
         pool.install(|| {
             sim.step().unwrap();
@@ -112,4 +119,30 @@ fn a_step_allocates_nothing_after_the_first() {
             assert_eq!(n, 0, "{solver:?} after a cut: three steps allocated {n} times");
         });
     }
+}
+
+#[test]
+fn bodies_stepped_together_allocate_nothing_after_the_first_step() {
+    let _turn = ONE_TEST_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let pool =
+        rayon::ThreadPoolBuilder::new().num_threads(2).start_handler(|_| MARKED.with(|m| m.set(true))).build().unwrap();
+    MARKED.with(|m| m.set(true));
+    let mut bodies: Vec<Simulation> = (0..16)
+        .map(|i| {
+            let mesh = random_convex([0.0, 0.0, 0.1], [0.5, 0.5, 0.6], 3 + i % 4, i as u64).unwrap();
+            let mut sim = Simulation::new(mesh, SimulationParams::default()).unwrap();
+            sim.add_collider(Collider::new([0.0; 3], [0.0, 0.0, 1.0], 1e6).unwrap());
+            sim
+        })
+        .collect();
+    let mut stats = vec![StepStats::default(); bodies.len()];
+    pool.install(|| {
+        step_bodies(&mut bodies, &mut stats).unwrap();
+        let n = allocations_of(|| {
+            for _ in 0..5 {
+                step_bodies(&mut bodies, &mut stats).unwrap();
+            }
+        });
+        assert_eq!(n, 0, "five steps of 16 bodies allocated {n} times");
+    });
 }

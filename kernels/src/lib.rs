@@ -26,6 +26,7 @@ pub use dyn_stack;
 pub mod corotation;
 pub mod dual;
 pub mod elasticity;
+pub mod envelope;
 pub mod harmonic;
 pub mod lanes;
 

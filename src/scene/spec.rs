@@ -345,8 +345,11 @@ pub enum SolverName {
     /// `"auto"`: Cholesky for small systems, CG for large ones.
     #[default]
     Auto,
-    /// `"cholesky"`.
+    /// `"cholesky"`: envelope factorisation for small systems, sparse
+    /// supernodal above.
     Cholesky,
+    /// `"sparse-cholesky"`: the sparse supernodal factorisation at every size.
+    SparseCholesky,
     /// `"cg"`: block-Jacobi preconditioned conjugate gradients.
     Cg,
     /// `"cg-rest"`: CG preconditioned by the rotated rest-state factor.
@@ -359,6 +362,7 @@ impl SolverName {
         match self {
             SolverName::Auto => SolverKind::Auto,
             SolverName::Cholesky => SolverKind::Cholesky,
+            SolverName::SparseCholesky => SolverKind::SparseCholesky,
             SolverName::Cg => SolverKind::Cg,
             SolverName::CgRest => SolverKind::CgRest,
         }

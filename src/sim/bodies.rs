@@ -24,14 +24,23 @@ impl std::fmt::Display for BodyError {
 
 impl std::error::Error for BodyError {}
 
-/// Steps every body of `bodies` once, in parallel over the bodies. Every
-/// body is stepped (a failing one is left as its step left it); the first
-/// failure by index is returned.
-pub fn step_bodies(bodies: &mut [Simulation]) -> Result<Vec<StepStats>, BodyError> {
-    let results: Vec<Result<StepStats, Error>> = bodies.par_iter_mut().map(Simulation::step).collect();
-    let mut stats = Vec::with_capacity(results.len());
-    for (body, r) in results.into_iter().enumerate() {
-        stats.push(r.map_err(|error| BodyError { body, error })?);
-    }
-    Ok(stats)
+/// Steps every body of `bodies` once, in parallel over the bodies, and
+/// writes each body's [`StepStats`] into `stats` (one per body). Every body
+/// is stepped (a failing one is left as its step left it); the failure of
+/// the lowest index is returned. Nothing is allocated unless a body fails.
+pub fn step_bodies(bodies: &mut [Simulation], stats: &mut [StepStats]) -> Result<(), BodyError> {
+    assert_eq!(bodies.len(), stats.len(), "one StepStats per body");
+    let failure = bodies
+        .par_iter_mut()
+        .zip(stats.par_iter_mut())
+        .enumerate()
+        .filter_map(|(body, (sim, stats))| match sim.step() {
+            Ok(s) => {
+                *stats = s;
+                None
+            }
+            Err(error) => Some(BodyError { body, error }),
+        })
+        .min_by_key(|e| e.body);
+    failure.map_or(Ok(()), Err)
 }

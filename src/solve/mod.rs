@@ -6,9 +6,11 @@
 
 mod cg;
 mod cholesky;
+mod envelope;
 
 pub use cg::{dot, symmetric_matvec, ConjugateGradient};
 pub use cholesky::Cholesky;
+pub use envelope::EnvelopeCholesky;
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use thiserror::Error;
@@ -88,13 +90,20 @@ pub trait LinearSolver: Send {
 /// The solvers a simulation can use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SolverKind {
-    /// Cholesky up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`] unknowns, CG above
-    /// (measured with `cleave bench`: on the 100k-tet bunny, 53k unknowns,
-    /// a CG step takes ~0.1 s and a refactorising Cholesky step ~0.7 s).
+    /// [`SolverKind::Cholesky`] up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`]
+    /// unknowns, CG above (measured with `cleave bench`: on the 100k-tet
+    /// bunny, 53k unknowns, a CG step takes ~0.1 s and a refactorising
+    /// Cholesky step ~0.7 s).
     #[default]
     Auto,
-    /// Sparse Cholesky, refactorised whenever the matrix changes.
+    /// Direct Cholesky, refactorised whenever the matrix changes: the
+    /// envelope factorisation ([`EnvelopeCholesky`]) up to
+    /// [`ENVELOPE_MAX_UNKNOWNS`] unknowns, the sparse supernodal one
+    /// ([`Cholesky`]) above.
     Cholesky,
+    /// The sparse supernodal Cholesky at every size (the large-system path
+    /// of [`SolverKind::Cholesky`], to compare against).
+    SparseCholesky,
     /// Block-Jacobi preconditioned conjugate gradients, warm-started.
     Cg,
     /// Conjugate gradients preconditioned by the Cholesky factor of the
@@ -106,12 +115,24 @@ pub enum SolverKind {
 /// Largest system that [`SolverKind::Auto`] solves by Cholesky.
 pub const AUTO_CHOLESKY_MAX_UNKNOWNS: usize = 30_000;
 
+/// Largest system that [`SolverKind::Cholesky`] factorises in its envelope.
+/// Measured (factor and solve of a step's matrix, AMD EPYC with AVX-512,
+/// one thread): the envelope takes half the time of the sparse path up to
+/// ~300 unknowns (random_cube_drop's 165: 48 against 92 µs; 90 hexahedral
+/// nodes, 270: 93 against 241 µs), about the same from 375 to 750 on
+/// compact boxes (4x4x4 hexahedra: 197 against 178 µs), and 1.4 times
+/// as long at 630 on a 6x5x4 box, growing from there.
+pub const ENVELOPE_MAX_UNKNOWNS: usize = 450;
+
 /// A boxed solver of `kind` for `unknowns` scalar unknowns (`tolerance` and
 /// `max_iterations` apply to CG).
 pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterations: usize) -> Box<dyn LinearSolver> {
     match kind {
+        SolverKind::Auto | SolverKind::Cholesky if unknowns <= ENVELOPE_MAX_UNKNOWNS => {
+            Box::new(EnvelopeCholesky::default())
+        }
         SolverKind::Auto if unknowns <= AUTO_CHOLESKY_MAX_UNKNOWNS => Box::new(Cholesky::default()),
-        SolverKind::Cholesky => Box::new(Cholesky::default()),
+        SolverKind::Cholesky | SolverKind::SparseCholesky => Box::new(Cholesky::default()),
         SolverKind::Auto | SolverKind::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
         SolverKind::CgRest => Box::new(ConjugateGradient::new(tolerance, max_iterations).with_rest_preconditioner()),
     }

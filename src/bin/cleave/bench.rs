@@ -717,9 +717,10 @@ fn body_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
     let count = if quick { 16 } else { 256 };
     let mut set: Vec<Simulation> =
         (0..count).map(|_| small_body(box_hex([0.0; 3], [1.0, 0.8, 0.4], [5, 4, 2])?)).collect::<Result<_, _>>()?;
-    cleave::sim::step_bodies(&mut set).map_err(|e| e.error)?;
+    let mut stats = vec![cleave::sim::StepStats::default(); count];
+    cleave::sim::step_bodies(&mut set, &mut stats).map_err(|e| e.error)?;
     let rounds = if quick { 2 } else { 10 };
-    let (ms, r) = best_ms(3, || (0..rounds).try_for_each(|_| cleave::sim::step_bodies(&mut set).map(|_| ())));
+    let (ms, r) = best_ms(3, || (0..rounds).try_for_each(|_| cleave::sim::step_bodies(&mut set, &mut stats)));
     r.map_err(|e| e.error)?;
     let body_steps = (count * rounds) as f64 / (ms * 1e-3);
     let elements = set.iter().map(|s| s.mesh().elements.len()).sum::<usize>();
