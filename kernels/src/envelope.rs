@@ -75,15 +75,15 @@ impl pulp::WithSimd for Factor<'_> {
             for j in (fi..i).step_by(3) {
                 let fj = first[j] as usize;
                 let f = fi.max(fj);
-                let other: [&[f64]; 3] = std::array::from_fn(|c| {
-                    let s = start[j + c] as usize + (f - fj);
-                    &done[s..s + (j - f)]
-                });
-                let s = dot3x3(std::array::from_fn(|r| &rows[r][f - fi..j - fi]), other);
+                let (s0, s1, s2) = (start[j] as usize, start[j + 1] as usize, start[j + 2] as usize);
+                let (o, len) = (f - fj, j - f);
+                let other = [&done[s0 + o..s0 + o + len], &done[s1 + o..s1 + o + len], &done[s2 + o..s2 + o + len]];
+                let (m, end) = (f - fi, j - fi);
+                let s = dot3x3([&rows[0][m..end], &rows[1][m..end], &rows[2][m..end]], other);
                 // L_IJ L_JJᵀ = A_IJ - S, by forward substitution over the
                 // columns of the lower triangular L_JJ
-                let ljj = |r: usize, c: usize| done[start[j + r] as usize + (j - fj) + c];
-                let (l10, l20, l21) = (ljj(1, 0), ljj(2, 0), ljj(2, 1));
+                let d = j - fj;
+                let (l10, l20, l21) = (done[s1 + d], done[s2 + d], done[s2 + d + 1]);
                 let inv = &inverse_diagonal[j..j + 3];
                 for (row, s) in rows.iter_mut().zip(&s) {
                     let x = &mut row[j - fi..j - fi + 3];
@@ -94,7 +94,8 @@ impl pulp::WithSimd for Factor<'_> {
             }
             // the diagonal block: A_II - L_I L_Iᵀ, then its own Cholesky
             let d = i - fi;
-            let s = dot3x3(std::array::from_fn(|r| &rows[r][..d]), std::array::from_fn(|r| &rows[r][..d]));
+            let mine = [&rows[0][..d], &rows[1][..d], &rows[2][..d]];
+            let s = dot3x3(mine, mine);
             for r in 0..3 {
                 for c in 0..r {
                     let mut v = rows[r][d + c] - s[r][c];
@@ -194,7 +195,6 @@ fn dot3x3(a: [&[f64]; 3], b: [&[f64]; 3]) -> [[f64; 3]; 3] {
         assert_eq!(v.len(), len, "rows of equal length");
     }
     let mut s = [[[0.0f64; LANES]; 3]; 3];
-    let chunk = |v: &[f64], k: usize| -> [f64; LANES] { v[k..k + LANES].try_into().unwrap_or([0.0; LANES]) };
     for k in (0..whole).step_by(LANES) {
         let av = [chunk(a[0], k), chunk(a[1], k), chunk(a[2], k)];
         let bv = [chunk(b[0], k), chunk(b[1], k), chunk(b[2], k)];
@@ -206,16 +206,25 @@ fn dot3x3(a: [&[f64]; 3], b: [&[f64]; 3]) -> [[f64; 3]; 3] {
             }
         }
     }
-    std::array::from_fn(|r| {
-        std::array::from_fn(|c| {
+    let mut out = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
             let p = &s[r][c];
             let mut sum = (p[0] + p[2]) + (p[1] + p[3]);
             for k in whole..len {
                 sum += a[r][k] * b[c][k];
             }
-            sum
-        })
-    })
+            out[r][c] = sum;
+        }
+    }
+    out
+}
+
+/// `LANES` values of `v` from `k` (within bounds: the caller's loop ends
+/// at a whole number of chunks).
+#[inline(always)]
+fn chunk(v: &[f64], k: usize) -> [f64; LANES] {
+    [v[k], v[k + 1], v[k + 2], v[k + 3]]
 }
 
 #[cfg(test)]

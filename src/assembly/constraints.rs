@@ -42,6 +42,9 @@ impl Constraints {
     /// free), fixed rows and columns are zeroed except the diagonal, which
     /// keeps `A_dd` (or 1 if that is not positive) with `b_d = A_dd x̄_d`.
     pub fn apply(&self, pattern: &SparsePattern, values: &mut [f64], rhs: &mut [f64]) {
+        if !self.fixed.contains(&true) {
+            return;
+        }
         let col_ptr = pattern.symbolic.col_ptr();
         let row_idx = pattern.symbolic.row_idx();
         let n = col_ptr.len() - 1;

@@ -125,12 +125,12 @@ impl LinearSolver for EnvelopeCholesky {
         if values.len() != self.target.len() {
             return Err(SolveError::NotReady);
         }
-        if values.iter().any(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
         self.factored = false;
         self.factor.fill(0.0);
         for (&t, &v) in self.target.iter().zip(values) {
+            if !v.is_finite() {
+                return Err(SolveError::NonFinite);
+            }
             if t != UPPER {
                 self.factor[t as usize] = v;
             }

@@ -11,7 +11,7 @@ use cleave::assembly::SparsePattern;
 use cleave::dg::DgElements;
 use cleave::material::Material;
 use cleave::mesh::{Plane, PolyMesh};
-use cleave::meshing::{box_hex, box_tet, element_with_vertices, replicate};
+use cleave::meshing::{box_hex, box_tet, element_with_vertices, random_convex, replicate};
 use cleave::sim::{Collider, FixedRegion, Simulation, SimulationParams};
 use cleave::solve::{Cholesky, LinearSolver, SolverKind};
 use cleave::store::dg::{DgOptions, Flux};
@@ -691,9 +691,10 @@ fn small_body(mesh: PolyMesh) -> Result<Simulation, Error> {
 }
 
 /// Microseconds per step of bodies of 1 (24 nodes), 8, 40 and 300
-/// elements, each alone (best of 5 runs of `steps` steps after a first
-/// one), and 256 bodies of 40 elements stepped together (body-steps per
-/// second in `extra`).
+/// elements and of random_cube_drop's body (30 convex cells), each alone
+/// (best of 5 runs of `steps` steps after a first one), and 256 bodies of
+/// 40 hexahedra, and of random_cube_drop's body, stepped together
+/// (body-steps per second in `extra`).
 fn body_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
     let steps = if quick { 20 } else { 200 };
     let single = element_with_vertices(24).ok_or_else(|| Error::Internal("no 24-vertex element".into()))?;
@@ -701,6 +702,7 @@ fn body_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
         ("1 element, 24 nodes".into(), single),
         ("8 hexahedra".into(), box_hex([0.0; 3], [1.0; 3], [2, 2, 2])?),
         ("40 hexahedra".into(), box_hex([0.0; 3], [1.0, 0.8, 0.4], [5, 4, 2])?),
+        ("random_cube_drop".into(), random_convex([0.0, 0.0, 0.3], [1.0, 1.0, 1.3], 7, 1)?),
         ("300 hexahedra".into(), box_hex([0.0; 3], [2.0, 1.2, 1.0], [10, 6, 5])?),
     ];
     let mut out = Vec::new();
@@ -715,23 +717,29 @@ fn body_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
         out.push(m);
     }
     let count = if quick { 16 } else { 256 };
-    let mut set: Vec<Simulation> =
-        (0..count).map(|_| small_body(box_hex([0.0; 3], [1.0, 0.8, 0.4], [5, 4, 2])?)).collect::<Result<_, _>>()?;
-    let mut stats = vec![cleave::sim::StepStats::default(); count];
-    cleave::sim::step_bodies(&mut set, &mut stats).map_err(|e| e.error)?;
     let rounds = if quick { 2 } else { 10 };
-    let (ms, r) = best_ms(3, || (0..rounds).try_for_each(|_| cleave::sim::step_bodies(&mut set, &mut stats)));
-    r.map_err(|e| e.error)?;
-    let body_steps = (count * rounds) as f64 / (ms * 1e-3);
-    let elements = set.iter().map(|s| s.mesh().elements.len()).sum::<usize>();
-    out.push(Measurement {
-        name: "bodies together".into(),
-        mesh: format!("{count} x 40 hexahedra"),
-        elements,
-        nodes: set.iter().map(|s| s.mesh().nodes.len()).sum(),
-        ms: ms / rounds as f64,
-        elements_per_s: elements as f64 * rounds as f64 / (ms * 1e-3),
-        extra: Some(("body-steps/s".into(), body_steps)),
-    });
+    // random_cube_drop's body: the unit box cut by 7 random planes (seed 1)
+    let kinds = [
+        ("40 hexahedra", box_hex([0.0; 3], [1.0, 0.8, 0.4], [5, 4, 2])?),
+        ("random_cube_drop", random_convex([0.0, 0.0, 0.3], [1.0, 1.0, 1.3], 7, 1)?),
+    ];
+    for (label, mesh) in kinds {
+        let mut set: Vec<Simulation> = (0..count).map(|_| small_body(mesh.clone())).collect::<Result<_, _>>()?;
+        let mut stats = vec![cleave::sim::StepStats::default(); count];
+        cleave::sim::step_bodies(&mut set, &mut stats).map_err(|e| e.error)?;
+        let (ms, r) = best_ms(3, || (0..rounds).try_for_each(|_| cleave::sim::step_bodies(&mut set, &mut stats)));
+        r.map_err(|e| e.error)?;
+        let body_steps = (count * rounds) as f64 / (ms * 1e-3);
+        let elements = set.iter().map(|s| s.mesh().elements.len()).sum::<usize>();
+        out.push(Measurement {
+            name: "bodies together".into(),
+            mesh: format!("{count} x {label}"),
+            elements,
+            nodes: set.iter().map(|s| s.mesh().nodes.len()).sum(),
+            ms: ms / rounds as f64,
+            elements_per_s: elements as f64 * rounds as f64 / (ms * 1e-3),
+            extra: Some(("body-steps/s".into(), body_steps)),
+        });
+    }
     Ok(out)
 }
