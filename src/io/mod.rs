@@ -30,7 +30,7 @@ pub use medit::{read_medit, write_medit};
 pub use obj::{read_obj_surface, write_boundary_obj, write_surface_obj, Surface};
 pub use stl::{read_stl_surface, read_surface};
 pub use tetgen::{read_tetgen, write_tetgen};
-pub use vtu::{read_vtu, write_surface_vtu, write_vtu, VtuFields};
+pub use vtu::{read_vtu, read_vtu_frame, write_collection, write_surface_vtu, write_vtu, VtuFields, VtuFrame};
 
 /// A failure to read or write a mesh file.
 #[derive(Debug, Error)]

@@ -28,7 +28,7 @@ pub struct VtuFields<'a> {
     pub point_vectors: Vec<(&'a str, &'a [[f64; 3]])>,
     /// Per-element scalars (e.g. `von_mises` in Pa).
     pub cell_scalars: Vec<(&'a str, &'a [f64])>,
-    /// Per-element integers (e.g. `element_id`, `vertex_count`).
+    /// Per-element integers (e.g. `vertex_count`; `element_id` is always written).
     pub cell_ints: Vec<(&'a str, &'a [i64])>,
 }
 
@@ -49,7 +49,14 @@ fn data_array(s: &mut String, ty: &str, name: &str, comps: usize, payload: Strin
 }
 
 /// Writes `mesh` with node positions `points` (m; pass the rest positions or
-/// the deformed ones) and the given fields.
+/// the deformed ones) and the given fields (cell fields in element order).
+///
+/// Polyhedral cells are written in ascending vertex count, by element index
+/// within a count, with their cell fields in the same order: meshio groups
+/// polyhedra by vertex count in order of first appearance but their cell
+/// data by ascending count, so any other order breaks its reading. The
+/// `element_id` cell field (written here) keeps the engine's numbering, and
+/// [`read_vtu`] restores that order.
 pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &VtuFields) -> Result<(), IoError> {
     let mut conn: Vec<i64> = Vec::new();
     let mut offsets: Vec<i64> = Vec::with_capacity(mesh.elements.len());
@@ -57,7 +64,11 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
     let mut faces: Vec<i64> = Vec::new();
     let mut faceoffsets: Vec<i64> = Vec::with_capacity(mesh.elements.len());
     let all_tets = mesh.elements.iter().all(|el| el.nodes.len() == 4 && el.faces.len() == 4);
-    for el in &mesh.elements {
+    let mut order: Vec<usize> = (0..mesh.elements.len()).collect();
+    if !all_tets {
+        order.sort_by_key(|&e| mesh.elements[e].nodes.len());
+    }
+    for el in order.iter().map(|&e| &mesh.elements[e]) {
         if all_tets {
             let v = &el.nodes;
             let rest = |i: usize| mesh.nodes[v[i] as usize];
@@ -83,7 +94,18 @@ pub fn write_vtu(path: &Path, mesh: &PolyMesh, points: &[[f64; 3]], fields: &Vtu
         offsets.push(conn.len() as i64);
     }
     let polyhedra = (!all_tets).then_some((&faces[..], &faceoffsets[..]));
-    write_cells(path, points, Cells { conn: &conn, offsets: &offsets, types: &types, polyhedra }, fields)
+    let scalars: Vec<Vec<f64>> =
+        fields.cell_scalars.iter().map(|(_, v)| order.iter().map(|&e| v[e]).collect()).collect();
+    let ints: Vec<Vec<i64>> = fields.cell_ints.iter().map(|(_, v)| order.iter().map(|&e| v[e]).collect()).collect();
+    let ids: Vec<i64> = order.iter().map(|&e| e as i64).collect();
+    let mut cell_ints: Vec<(&str, &[i64])> = vec![("element_id", &ids)];
+    cell_ints.extend(fields.cell_ints.iter().zip(&ints).map(|((name, _), v)| (*name, &v[..])));
+    let ordered = VtuFields {
+        point_vectors: fields.point_vectors.clone(),
+        cell_scalars: fields.cell_scalars.iter().zip(&scalars).map(|((name, _), v)| (*name, &v[..])).collect(),
+        cell_ints,
+    };
+    write_cells(path, points, Cells { conn: &conn, offsets: &offsets, types: &types, polyhedra }, &ordered)
 }
 
 /// The cells of an unstructured grid: connectivity, offsets, VTK types,
@@ -131,6 +153,19 @@ fn write_cells(path: &Path, points: &[[f64; 3]], cells: Cells, fields: &VtuField
     write_text(path, &s)
 }
 
+/// Writes a ParaView collection (`.pvd`) of the VTU files `frames`
+/// (time in s, file name relative to the collection), so that ParaView
+/// opens the run as one time series at its real times.
+pub fn write_collection(path: &Path, frames: &[(f64, String)]) -> Result<(), IoError> {
+    let mut s =
+        String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n");
+    for (t, file) in frames {
+        let _ = writeln!(s, "    <DataSet timestep=\"{t:e}\" part=\"0\" file=\"{file}\"/>");
+    }
+    s.push_str("  </Collection>\n</VTKFile>\n");
+    write_text(path, &s)
+}
+
 /// Writes a triangle surface (VTK triangles) over `vertices` (m) with
 /// per-vertex 3-vectors `point_vectors` (name, values).
 pub fn write_surface_vtu(
@@ -155,6 +190,25 @@ struct Array {
 
 /// Reads the cells of a `.vtu` file as a mesh.
 pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
+    read_vtu_frame(path).map(|f| f.mesh)
+}
+
+/// A frame as cleave writes it: the cells over the file's points, the
+/// `displacement` point field and the `von_mises` cell field where the file
+/// has them (in the mesh's element order).
+#[derive(Clone, Debug)]
+pub struct VtuFrame {
+    /// The cells, in the engine's element order where the file numbers
+    /// them (`element_id`); nodes at the file's points.
+    pub mesh: PolyMesh,
+    /// Displacement of every point (m).
+    pub displacement: Option<Vec<[f64; 3]>>,
+    /// Von Mises stress of every element (Pa).
+    pub von_mises: Option<Vec<f64>>,
+}
+
+/// Reads a VTU file with its frame fields (see [`VtuFrame`]).
+pub fn read_vtu_frame(path: &Path) -> Result<VtuFrame, IoError> {
     let text = read_text(path)?;
     let line_at =
         |pos: u64| text.as_bytes()[..(pos as usize).min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1;
@@ -165,6 +219,8 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
     let mut body = String::new();
     let mut points: Option<Array> = None;
     let mut cell_arrays: Vec<Array> = Vec::new();
+    let mut element_id: Option<Array> = None;
+    let (mut displacement, mut von_mises): (Option<Array>, Option<Array>) = (None, None);
     loop {
         let pos = reader.buffer_position();
         let ev = reader.read_event().map_err(|e| IoError::parse(path, line_at(pos), format!("malformed XML: {e}")))?;
@@ -222,6 +278,9 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
                     match section.as_str() {
                         "Points" => points = Some(arr),
                         "Cells" => cell_arrays.push(arr),
+                        "CellData" if arr.name == "element_id" => element_id = Some(arr),
+                        "CellData" if arr.name == "von_mises" => von_mises = Some(arr),
+                        "PointData" if arr.name == "displacement" => displacement = Some(arr),
                         _ => {}
                     }
                 }
@@ -322,7 +381,31 @@ pub fn read_vtu(path: &Path) -> Result<PolyMesh, IoError> {
             }
         }
     }
-    PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))
+    let mut von_mises = von_mises.map(|a| a.values).filter(|v| v.len() == cells.len());
+    // the engine's element order, where the file carries it
+    if let Some(ids) = element_id.filter(|ids| ids.values.len() == cells.len()) {
+        let mut slot: Vec<Option<(Cell, f64)>> = vec![None; cells.len()];
+        for (c, (cell, &id)) in cells.into_iter().zip(&ids.values).enumerate() {
+            let i = as_index(&ids, id)?;
+            let stress = von_mises.as_ref().map_or(0.0, |v| v[c]);
+            match slot.get_mut(i) {
+                Some(s @ None) => *s = Some((cell, stress)),
+                _ => return Err(IoError::parse(path, ids.line, format!("element_id {i} is out of range or repeated"))),
+            }
+        }
+        let (ordered, stress): (Vec<Cell>, Vec<f64>) = slot.into_iter().flatten().unzip();
+        cells = ordered;
+        von_mises = von_mises.map(|_| stress);
+    }
+    let displacement = match displacement {
+        Some(a) if a.values.len() == 3 * nodes.len() => {
+            Some(a.values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+        }
+        Some(a) => return Err(IoError::parse(path, a.line, "displacement does not hold 3 values per point")),
+        None => None,
+    };
+    let mesh = PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))?;
+    Ok(VtuFrame { mesh, displacement, von_mises })
 }
 
 fn decode_array(
