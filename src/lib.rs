@@ -35,6 +35,7 @@ pub mod mesh;
 pub mod meshing;
 pub mod output;
 pub mod param;
+pub mod render;
 pub mod scene;
 pub mod sim;
 pub mod solve;

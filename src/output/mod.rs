@@ -1,4 +1,4 @@
-//! Frames (VTU, OBJ) and the run summary (`summary.json`).
+//! Frames (VTU, OBJ, PNG) and the run summary (`summary.json`).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -7,6 +7,8 @@ use serde::Serialize;
 
 use crate::dg::DgElements;
 use crate::io::{write_boundary_obj, write_surface_obj, write_surface_vtu, write_vtu, IoError, VtuFields};
+use crate::mesh::{Plane, PolyMesh};
+use crate::render::{write_png, Renderer, Surface};
 use crate::sim::{Located, PhaseTimings, Simulation};
 
 /// Frame formats.
@@ -17,10 +19,60 @@ pub enum Format {
     Vtu,
     /// The boundary surface as OBJ.
     Obj,
+    /// A rendered picture of the boundary surface ([`Pictures`]).
+    Png,
+}
+
+/// The pictures of a run (`frame_NNNN.png`): the camera and the original
+/// boundary are taken from the first frame written.
+pub struct Pictures {
+    renderer: Option<Renderer>,
+    stress: bool,
+}
+
+/// Size of a picture (pixels).
+pub const PICTURE_SIZE: (u32, u32) = (960, 720);
+
+impl Pictures {
+    /// Pictures coloured by von Mises stress if `stress`, else plain with
+    /// cut faces in a second colour.
+    pub fn new(stress: bool) -> Self {
+        Pictures { renderer: None, stress }
+    }
+
+    /// Renders frame `index` of `sim` into `dir`.
+    pub fn write(&mut self, dir: &Path, index: usize, sim: &Simulation) -> Result<(), IoError> {
+        let stress = self.stress.then(|| nodal_average(sim.mesh(), &sim.von_mises()));
+        let surface = Surface {
+            rest: &sim.mesh().nodes,
+            positions: sim.positions(),
+            triangles: sim.boundary_triangles(),
+            stress: stress.as_deref(),
+        };
+        let renderer = self.renderer.get_or_insert_with(|| {
+            let g = sim.params().gravity;
+            let ground = sim.colliders().first().map(|c| Plane { point: c.point, normal: c.normal });
+            Renderer::new(&surface, [-g[0], -g[1], -g[2]], ground, PICTURE_SIZE.0, PICTURE_SIZE.1)
+        });
+        write_png(&dir.join(format!("frame_{index:04}.png")), &renderer.render(&surface))
+    }
+}
+
+/// The mean of `values` (one per element) over the elements around each
+/// node.
+pub fn nodal_average(mesh: &PolyMesh, values: &[f64]) -> Vec<f64> {
+    let (mut sum, mut count) = (vec![0.0; mesh.nodes.len()], vec![0u32; mesh.nodes.len()]);
+    for (el, &v) in mesh.elements.iter().zip(values) {
+        for &n in &el.nodes {
+            sum[n as usize] += v;
+            count[n as usize] += 1;
+        }
+    }
+    sum.iter().zip(&count).map(|(s, &c)| if c > 0 { s / f64::from(c) } else { 0.0 }).collect()
 }
 
 /// Writes frame `index` of `sim` in `formats` into `dir`
-/// (`frame_NNNN.vtu`, `frame_NNNN.obj`). Points are the deformed positions;
+/// (`frame_NNNN.vtu`, `frame_NNNN.obj`; PNG is [`Pictures`]'s). Points are the deformed positions;
 /// `displacement` lets a reader recover the rest ones.
 pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format]) -> Result<(), IoError> {
     let positions = sim.positions();
@@ -28,7 +80,6 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
         match f {
             Format::Vtu => {
                 let mesh = sim.mesh();
-                let ids: Vec<i64> = (0..mesh.elements.len() as i64).collect();
                 let counts: Vec<i64> = mesh.elements.iter().map(|e| e.nodes.len() as i64).collect();
                 let vm = sim.von_mises();
                 let mut point_vectors = vec![("displacement", sim.displacements()), ("velocity", sim.velocities())];
@@ -39,7 +90,7 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                 let fields = VtuFields {
                     point_vectors,
                     cell_scalars: vec![("von_mises", &vm)],
-                    cell_ints: vec![("element_id", &ids), ("vertex_count", &counts)],
+                    cell_ints: vec![("vertex_count", &counts)],
                 };
                 write_vtu(&dir.join(format!("frame_{index:04}.vtu")), mesh, positions, &fields)?;
                 if let Some(dg) = sim.dg() {
@@ -70,6 +121,8 @@ pub fn write_frame(dir: &Path, index: usize, sim: &Simulation, formats: &[Format
                     write_surface_obj(&path, &surface.vertices, &surface.triangles)?;
                 }
             }
+            // pictures keep a camera across frames: written by [`Pictures`]
+            Format::Png => {}
         }
     }
     Ok(())
@@ -97,11 +150,10 @@ fn write_dg_elements(path: &Path, sim: &Simulation, dg: &DgElements, von_mises: 
         displacement.push([p[0] - rest[0], p[1] - rest[1], p[2] - rest[2]]);
         velocity.push(field(v));
     }
-    let ids: Vec<i64> = (0..mesh.elements.len() as i64).collect();
     let fields = VtuFields {
         point_vectors: vec![("displacement", &displacement), ("velocity", &velocity)],
         cell_scalars: vec![("von_mises", von_mises)],
-        cell_ints: vec![("element_id", &ids)],
+        cell_ints: vec![],
     };
     write_vtu(path, &exploded, &position, &fields)
 }

@@ -4,9 +4,11 @@
 //! range is rejected with its key, line and allowed range. Relative paths are
 //! resolved against the scene file's folder.
 
+mod render;
 mod run;
 mod spec;
 
+pub use render::render_run;
 pub use run::{run_scene, RunOptions};
 pub use spec::*;
 
@@ -50,18 +52,6 @@ pub enum SceneError {
         value: String,
         /// What is allowed.
         allowed: String,
-    },
-    /// A valid key asks for something this build does not do yet.
-    #[error("{}:{line}: {key}: {message}", .path.display())]
-    Unsupported {
-        /// The file.
-        path: PathBuf,
-        /// The line (1-based).
-        line: usize,
-        /// The scene key (dotted path).
-        key: String,
-        /// What is wrong.
-        message: String,
     },
     /// The engine failed while building or running the scene.
     #[error("{}: {source}", .path.display())]
@@ -134,15 +124,6 @@ impl LoadedScene {
     /// The engine's [`ParamError`] as an error at scene key `key`.
     pub(crate) fn param(&self, key: &str, e: ParamError) -> SceneError {
         self.invalid(key, e.value, &e.allowed)
-    }
-
-    pub(crate) fn unsupported(&self, key: &str, message: &str) -> SceneError {
-        SceneError::Unsupported {
-            path: self.path.clone(),
-            line: self.line_of(key),
-            key: key.to_string(),
-            message: message.to_string(),
-        }
     }
 }
 

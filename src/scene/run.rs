@@ -4,13 +4,15 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use super::{BoxElement, Generator, LoadedScene, MeshingMethod, Mode, SceneError};
-use crate::io::{read_mesh, read_surface};
+use super::{BoxElement, Generator, LoadedScene, MeshingMethod, Mode, PictureColor, SceneError};
+use crate::io::{read_mesh, read_surface, write_collection};
 use crate::mesh::PolyMesh;
 use crate::meshing::{
     box_hex, box_l_prisms, box_tet, clipped_box, grid_slice, octree, prism, random_convex, SliceOptions,
 };
-use crate::output::{write_frame, write_summary, DgSummary, MeanMax, MeshCounts, SolverSummary, Summary};
+use crate::output::{
+    write_frame, write_summary, DgSummary, Format, MeanMax, MeshCounts, Pictures, SolverSummary, Summary,
+};
 use crate::sim::{EmbeddedSurface, Located, Simulation};
 use crate::surface::prepare;
 use crate::topology::merge_slivers;
@@ -191,9 +193,20 @@ fn run(scene: &LoadedScene, opts: &RunOptions) -> Result<Summary, Failure> {
     let (mut worst_stretch, mut max_node_speed) = (Located { value: 1.0, at: 0 }, Located::default());
     let mut min_mass_ratio = sim.min_mass_ratio();
     let formats = s.formats();
+    // the time series for ParaView, rewritten with every frame so that an
+    // interrupted run leaves one that lists what it wrote
+    let mut collection: Vec<(f64, String)> = Vec::new();
+    let mut pictures = formats.contains(&Format::Png).then(|| Pictures::new(s.output.color == PictureColor::VonMises));
     let mut write = |sim: &mut Simulation, index: usize| -> Result<(), Error> {
         let t = Instant::now();
         write_frame(&dir, index, sim, &formats)?;
+        if let Some(pictures) = pictures.as_mut() {
+            pictures.write(&dir, index, sim)?;
+        }
+        if formats.contains(&Format::Vtu) {
+            collection.push((sim.time(), format!("frame_{index:04}.vtu")));
+            write_collection(&dir.join("run.pvd"), &collection)?;
+        }
         let (stretch, speed) = (sim.worst_stretch(), sim.max_node_speed());
         if stretch.value > worst_stretch.value {
             worst_stretch = stretch;

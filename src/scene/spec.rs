@@ -486,6 +486,21 @@ pub struct OutputSpec {
     /// Frame formats.
     #[serde(default = "default_formats")]
     pub formats: Vec<FormatName>,
+    /// What colours the pictures: `"plain"` (cut faces in a second colour)
+    /// or `"von-mises"` (stress, with a legend).
+    #[serde(default)]
+    pub color: PictureColor,
+}
+
+/// What colours a picture.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum PictureColor {
+    /// The body in one colour, faces opened by cuts in another.
+    #[default]
+    Plain,
+    /// Von Mises stress (Pa), averaged at the nodes, with a legend.
+    VonMises,
 }
 
 fn default_every() -> usize {
@@ -497,7 +512,7 @@ fn default_formats() -> Vec<FormatName> {
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        OutputSpec { dir: None, every: 1, formats: default_formats() }
+        OutputSpec { dir: None, every: 1, formats: default_formats(), color: PictureColor::Plain }
     }
 }
 
@@ -509,17 +524,17 @@ pub enum FormatName {
     Vtu,
     /// `"obj"`: boundary surface as OBJ.
     Obj,
-    /// `"png"`: rendered snapshot (not implemented yet).
+    /// `"png"`: a rendered picture of the boundary surface.
     Png,
 }
 
 impl FormatName {
-    /// The output format, or `None` for one not implemented.
-    pub fn format(self) -> Option<Format> {
+    /// The output format.
+    pub fn format(self) -> Format {
         match self {
-            FormatName::Vtu => Some(Format::Vtu),
-            FormatName::Obj => Some(Format::Obj),
-            FormatName::Png => None,
+            FormatName::Vtu => Format::Vtu,
+            FormatName::Obj => Format::Obj,
+            FormatName::Png => Format::Png,
         }
     }
 }
@@ -712,11 +727,6 @@ impl Scene {
         if self.output.every == 0 {
             return Err(s.invalid("output.every", 0, "must be at least 1"));
         }
-        if self.output.formats.iter().any(|f| f.format().is_none()) {
-            return Err(
-                s.unsupported("output.formats", "png snapshots are not implemented yet; use \"vtu\" and \"obj\"")
-            );
-        }
         Ok(())
     }
 
@@ -779,7 +789,7 @@ impl Scene {
 
     /// The frame formats of the scene (all implemented, checked at load).
     pub fn formats(&self) -> Vec<Format> {
-        self.output.formats.iter().filter_map(|f| f.format()).collect()
+        self.output.formats.iter().map(|f| f.format()).collect()
     }
 }
 

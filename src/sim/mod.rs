@@ -470,6 +470,11 @@ impl Simulation {
         &self.surface
     }
 
+    /// The plane colliders, in the order they were added.
+    pub fn colliders(&self) -> &[Collider] {
+        &self.boundary.colliders
+    }
+
     /// Masses per unknown block (kg): lumped nodal masses, or for DG the
     /// exact masses `ρ V` of each element's orthonormal functions.
     pub fn masses(&self) -> &[f64] {

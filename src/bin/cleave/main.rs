@@ -38,6 +38,15 @@ enum Command {
         /// A mesh file (.mesh, .msh, .vtu, .node/.ele).
         mesh: PathBuf,
     },
+    /// Render every frame of a finished run (its VTU frames) to PNG.
+    Render {
+        /// The run's output folder.
+        dir: PathBuf,
+        /// Colour by von Mises stress (with a legend) instead of plain
+        /// with cut faces in a second colour.
+        #[arg(long)]
+        stress: bool,
+    },
     /// Run the throughput suite.
     Bench {
         /// Write the report as JSON here.
@@ -85,6 +94,12 @@ fn run(cli: Cli) -> Result<(), String> {
                 summary.max_displacement,
                 dir.display()
             );
+            Ok(())
+        }
+        Command::Render { dir, stress } => {
+            let t = std::time::Instant::now();
+            let n = cleave::scene::render_run(&dir, stress).map_err(|e| e.to_string())?;
+            println!("{}: {n} pictures in {:.2} s", dir.display(), t.elapsed().as_secs_f64());
             Ok(())
         }
         Command::Info { mesh } => {
