@@ -57,7 +57,7 @@ pub struct SolveStats {
 }
 
 /// A solver of `A x = b` for symmetric positive definite `A`.
-pub trait LinearSolver: Send {
+pub trait LinearSolver: Send + Sync {
     /// Prepares for matrices with the structure `pattern` (both triangles).
     fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError>;
     /// Takes the current values of the matrix.
