@@ -123,17 +123,10 @@ impl LinearSolver for Cholesky {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
-        if b.iter().any(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        x.copy_from_slice(b);
-        self.solve_in_place(x)?;
-        if x.iter().any(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        self.residual.resize(b.len(), 0.0);
-        let residual = super::relative_residual(matrix, b, x, &mut self.residual);
-        Ok(SolveStats { iterations: 1, residual })
+        let mut residual = std::mem::take(&mut self.residual);
+        let stats = super::direct_solve(matrix, b, x, &mut residual, |x| self.solve_in_place(x));
+        self.residual = residual;
+        stats
     }
 }
 

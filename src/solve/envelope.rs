@@ -16,7 +16,7 @@
 use cleave_kernels::envelope::{self, Envelope};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 
-use super::{relative_residual, LinearSolver, SolveError, SolveStats};
+use super::{LinearSolver, SolveError, SolveStats};
 
 /// A value slot of the pattern that is not copied (the upper triangle).
 const UPPER: u32 = u32::MAX;
@@ -152,16 +152,10 @@ impl LinearSolver for EnvelopeCholesky {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
-        if b.iter().any(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        x.copy_from_slice(b);
-        self.solve_in_place(x)?;
-        if x.iter().any(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        let residual = relative_residual(matrix, b, x, &mut self.residual);
-        Ok(SolveStats { iterations: 1, residual })
+        let mut residual = std::mem::take(&mut self.residual);
+        let stats = super::direct_solve(matrix, b, x, &mut residual, |x| self.solve_in_place(x));
+        self.residual = residual;
+        stats
     }
 }
 

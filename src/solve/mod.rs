@@ -138,6 +138,29 @@ pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterat
     }
 }
 
+/// The solve of a direct solver: `x = A⁻¹ b` by `solve_in_place` (which
+/// overwrites its argument with the solution), the right-hand side and the
+/// solution checked finite, and the relative residual reported (`r` is
+/// scratch, sized here to `b.len()`).
+fn direct_solve(
+    matrix: SparseColMatRef<'_, usize, f64>,
+    b: &[f64],
+    x: &mut [f64],
+    r: &mut Vec<f64>,
+    solve_in_place: impl FnOnce(&mut [f64]) -> Result<(), SolveError>,
+) -> Result<SolveStats, SolveError> {
+    if b.iter().any(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    x.copy_from_slice(b);
+    solve_in_place(x)?;
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite);
+    }
+    r.resize(b.len(), 0.0);
+    Ok(SolveStats { iterations: 1, residual: relative_residual(matrix, b, x, r) })
+}
+
 /// Relative residual `|b - A x| / |b|` (`|A x|` when `b` is zero) for
 /// symmetric `A` stored in both triangles; `r` is scratch of `b.len()`
 /// values.
