@@ -85,13 +85,13 @@ impl BatchState {
     /// positions `x` (m); returns the largest number of rotation iterations.
     fn update_range(&mut self, b: &Batch, x: &[[f64; 3]], warp: bool, range: std::ops::Range<usize>) -> usize {
         let (k, first, end) = (b.k, range.start, range.end);
-        // 1. deformation gradients, SIMD over elements
+        // 1. deformation gradients
         self.gradient[range.clone()]
             .par_chunks_mut(TASK)
             .zip(b.nodes[first * k..end * k].par_chunks(TASK * k))
             .zip(b.stress_grads[first * k..end * k].par_chunks(TASK * k))
             .for_each(|((f, nodes), grads)| deformation_gradients(k, nodes, x, grads, f));
-        // 2. rotations, SIMD over elements, warm-started
+        // 2. rotations, SIMD over elements (the polar decomposition), warm-started
         let mut most = 0;
         if warp {
             most = self.quaternion[range.clone()]
@@ -105,7 +105,7 @@ impl BatchState {
                 .zip(self.quaternion[range.clone()].par_chunks(TASK))
                 .for_each(|(r, q)| r.iter_mut().zip(q).for_each(|(r, q)| *r = rotation_matrix(*q)));
         }
-        // 3. forces (and rotated gradients of tetrahedra), SIMD over elements
+        // 3. forces (and rotated gradients of tetrahedra)
         let (rotation, gradient) = (&self.rotation[range.clone()], &self.gradient[range.clone()]);
         let forces = &mut self.force[first * k..end * k];
         if b.is_tet() {
