@@ -18,9 +18,7 @@ pub struct Surface {
 impl Surface {
     /// Axis-aligned bounding box `(min, max)` of the vertices (m).
     pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
-        let lo = [0, 1, 2].map(|a| self.vertices.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min));
-        let hi = [0, 1, 2].map(|a| self.vertices.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max));
-        (lo, hi)
+        cleave_kernels::vec3::bounding_box(&self.vertices)
     }
 }
 

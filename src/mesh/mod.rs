@@ -336,15 +336,7 @@ impl PolyMesh {
 
     /// Axis-aligned bounding box `(min, max)` of the nodes (m).
     pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in &self.nodes {
-            for i in 0..3 {
-                lo[i] = lo[i].min(p[i]);
-                hi[i] = hi[i].max(p[i]);
-            }
-        }
-        (lo, hi)
+        cleave_kernels::vec3::bounding_box(&self.nodes)
     }
 
     /// A new mesh holding only `elements` (in that order), with unused nodes

@@ -49,12 +49,24 @@ impl Pictures {
             triangles: sim.boundary_triangles(),
             stress: stress.as_deref(),
         };
-        let renderer = self.renderer.get_or_insert_with(|| {
-            let g = sim.params().gravity;
-            let ground = sim.colliders().first().map(|c| Plane { point: c.point, normal: c.normal });
-            Renderer::new(&surface, [-g[0], -g[1], -g[2]], ground, PICTURE_SIZE.0, PICTURE_SIZE.1)
-        });
-        write_png(&dir.join(format!("frame_{index:04}.png")), &renderer.render(&surface))
+        let g = sim.params().gravity;
+        let ground = sim.colliders().first().map(|c| Plane { point: c.point, normal: c.normal });
+        self.draw(&dir.join(format!("frame_{index:04}.png")), &surface, [-g[0], -g[1], -g[2]], ground)
+    }
+
+    /// Renders `surface` to the PNG `path`; the first surface drawn fits
+    /// the camera (with `up` up on screen, over `ground`), which later
+    /// ones keep.
+    pub fn draw(
+        &mut self,
+        path: &Path,
+        surface: &Surface<'_>,
+        up: [f64; 3],
+        ground: Option<Plane>,
+    ) -> Result<(), IoError> {
+        let renderer =
+            self.renderer.get_or_insert_with(|| Renderer::new(surface, up, ground, PICTURE_SIZE.0, PICTURE_SIZE.1));
+        write_png(path, &renderer.render(surface))
     }
 }
 

@@ -14,7 +14,7 @@ mod raster;
 
 use std::path::Path;
 
-use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
+use cleave_kernels::vec3::{add, bounding_box, cross, dot, norm, scale, sub};
 
 use crate::io::IoError;
 use crate::mesh::Plane;
@@ -107,6 +107,8 @@ struct Camera {
     right: [f64; 3],
     up: [f64; 3],
     forward: [f64; 3],
+    /// Direction to the light: over the viewer's left shoulder.
+    light: [f64; 3],
     /// Pixels per metre.
     scale: f64,
     width: u32,
@@ -126,6 +128,7 @@ impl Camera {
         let forward = scale(eye, -1.0);
         let right = normalize(cross(forward, up));
         let screen_up = cross(right, forward);
+        let light = normalize(add(add(scale(right, -0.4), scale(screen_up, 0.6)), scale(forward, -0.7)));
         let (lo, hi) = bounds(points);
         let center = scale(add(lo, hi), 0.5);
         let (mut ex, mut ey) = (1e-12f64, 1e-12f64);
@@ -135,7 +138,7 @@ impl Camera {
             ey = ey.max(dot(d, screen_up).abs());
         }
         let scale = 0.5 / 1.6 * (f64::from(width) / ex).min(f64::from(height) / ey);
-        Camera { center, right, up: screen_up, forward, scale, width, height }
+        Camera { center, right, up: screen_up, forward, light, scale, width, height }
     }
 
     /// Pixel coordinates (x right, y down) and depth (m, larger is farther).
@@ -153,8 +156,7 @@ impl Camera {
 /// a light over the viewer's left shoulder.
 fn shade(cam: &Camera, tri: &[[f64; 3]; 3], colour: [f64; 3]) -> [u8; 3] {
     let n = cross(sub(tri[1], tri[0]), sub(tri[2], tri[0]));
-    let light = normalize(add(add(scale(cam.right, -0.4), scale(cam.up, 0.6)), scale(cam.forward, -0.7)));
-    let lit = if norm(n) > 0.0 { dot(normalize(n), light).abs() } else { 0.0 };
+    let lit = if norm(n) > 0.0 { dot(normalize(n), cam.light).abs() } else { 0.0 };
     let k = 0.35 + 0.65 * lit;
     colour.map(|c| (255.0 * (k * c).clamp(0.0, 1.0)).round() as u8)
 }
@@ -333,19 +335,12 @@ pub fn write_png(path: &Path, image: &Image) -> Result<(), IoError> {
     writer.finish().map_err(os)
 }
 
+/// The bounding box of `points`, the origin when there are none.
 fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in points {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
     if points.is_empty() {
         return ([0.0; 3], [0.0; 3]);
     }
-    (lo, hi)
+    bounding_box(points)
 }
 
 fn normalize(a: [f64; 3]) -> [f64; 3] {

@@ -4,8 +4,8 @@ use std::path::Path;
 
 use crate::io::{read_vtu_frame, IoError};
 use crate::mesh::Plane;
-use crate::output::{nodal_average, PICTURE_SIZE};
-use crate::render::{write_png, Renderer, Surface};
+use crate::output::{nodal_average, Pictures};
+use crate::render::Surface;
 
 use super::LoadedScene;
 
@@ -18,7 +18,7 @@ use super::LoadedScene;
 pub fn render_run(dir: &Path, stress: bool) -> Result<usize, IoError> {
     let frames = frame_files(dir)?;
     let (up, ground) = scene_view(dir);
-    let mut renderer: Option<Renderer> = None;
+    let mut pictures = Pictures::new(stress);
     for name in &frames {
         let path = dir.join(name);
         let frame = read_vtu_frame(&path)?;
@@ -33,9 +33,7 @@ pub fn render_run(dir: &Path, stress: bool) -> Result<usize, IoError> {
         };
         let triangles = frame.mesh.boundary_triangles();
         let surface = Surface { rest: &rest, positions, triangles: &triangles, stress: stress.as_deref() };
-        let renderer =
-            renderer.get_or_insert_with(|| Renderer::new(&surface, up, ground, PICTURE_SIZE.0, PICTURE_SIZE.1));
-        write_png(&path.with_extension("png"), &renderer.render(&surface))?;
+        pictures.draw(&path.with_extension("png"), &surface, up, ground)?;
     }
     Ok(frames.len())
 }
