@@ -55,6 +55,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod assembly;
+pub mod checkpoint;
 pub mod dg;
 pub mod io;
 pub mod material;

@@ -3,7 +3,7 @@
 use crate::param::{positive, ParamError};
 
 /// Linear isotropic elastic material with mass density.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Material {
     /// Young's modulus `E` (Pa).
     pub young: f64,

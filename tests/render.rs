@@ -78,7 +78,7 @@ fn a_run_renders_from_its_frames_with_a_stress_legend() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let scene = cleave::scene::LoadedScene::load(&root.join("scenes/cube_slice.toml")).unwrap();
     let out = dir.path().join("cube_slice");
-    let opts = cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(60) };
+    let opts = cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(60), ..Default::default() };
     cleave::scene::run_scene(&scene, &opts).unwrap();
     let n = cleave::scene::render_run(&out, true).unwrap();
     assert!(n >= 2, "{n} pictures");

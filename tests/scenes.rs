@@ -190,9 +190,11 @@ fn every_shipped_scene_runs_through_its_cuts_and_stays_healthy() {
         let scene = LoadedScene::load(&path).unwrap();
         let out = dir.path().join(path.file_stem().unwrap());
         let steps = if scene.scene.cut.is_empty() { 3 } else { scene.scene.simulation.steps };
-        let summary =
-            cleave::scene::run_scene(&scene, &cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(steps) })
-                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let summary = cleave::scene::run_scene(
+            &scene,
+            &cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(steps), ..Default::default() },
+        )
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let name = path.file_stem().unwrap().to_string_lossy().into_owned();
         println!(
             "{name}: {} steps, {} -> {} elements, stretch {:.3}, fastest node {:.2} m/s (free fall {:.2}), lightest node {:.3}, {} cut retries",

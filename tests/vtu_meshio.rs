@@ -30,7 +30,7 @@ fn meshio_reads_our_tetra_and_polyhedron_files() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let scene = LoadedScene::load(&root.join("scenes/cantilever_tet.toml")).unwrap();
     let out = dir.path().join("cantilever");
-    let summary = run_scene(&scene, &RunOptions { out: Some(out.clone()), steps: None }).unwrap();
+    let summary = run_scene(&scene, &RunOptions { out: Some(out.clone()), ..Default::default() }).unwrap();
     let poly = random_convex([0.0; 3], [1.0; 3], 8, 2).unwrap();
     let poly_path = dir.path().join("poly.vtu");
     write_vtu(&poly_path, &poly, &poly.nodes, &VtuFields::default()).unwrap();

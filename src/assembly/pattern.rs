@@ -8,7 +8,7 @@ use super::{Couplings, MAX_ENTRY_BLOCKS};
 
 /// One element touching a node: where the node sits in it, and where the
 /// element's blocks land in the node's column.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 struct Incidence {
     /// The element's batch and index in it (refreshed after every update).
     batch: u32,
@@ -54,6 +54,72 @@ pub struct SparsePattern {
     /// them instead of fresh memory (a cut costs no page faults for the
     /// large arrays, at the price of keeping them twice).
     spare: Buffers,
+}
+
+/// A pattern as a checkpoint stores it: the arrays, the compressed
+/// columns as plain vectors (faer's structure has no serde support), and
+/// no spare buffers (they hold capacity, not data).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Stored<Columns, Incidences, Numbers> {
+    num_blocks: usize,
+    col_ptr: Columns,
+    row_idx: Columns,
+    col_stride: Columns,
+    offsets: Numbers,
+    incidences: Incidences,
+    slots: Numbers,
+    diagonal: Numbers,
+}
+
+impl serde::Serialize for SparsePattern {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        Stored {
+            num_blocks: self.num_blocks,
+            col_ptr: self.symbolic.col_ptr(),
+            row_idx: self.symbolic.row_idx(),
+            col_stride: &self.col_stride[..],
+            offsets: &self.offsets[..],
+            incidences: &self.incidences[..],
+            slots: &self.slots[..],
+            diagonal: &self.diagonal[..],
+        }
+        .serialize(serializer)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for SparsePattern {
+    /// Checks the compressed columns (sorted rows in range, monotone
+    /// offsets) and the per-node arrays' lengths before building faer's
+    /// structure, which would panic on them.
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let s: Stored<Vec<usize>, Vec<Incidence>, Vec<u32>> = serde::Deserialize::deserialize(deserializer)?;
+        let n = 3 * s.num_blocks;
+        let columns_ok = s.col_ptr.len() == n + 1
+            && s.col_ptr.first() == Some(&0)
+            && s.col_ptr.last() == Some(&s.row_idx.len())
+            && s.col_ptr.windows(2).all(|w| w[0] <= w[1])
+            && s.col_ptr.windows(2).all(|w| {
+                let rows = &s.row_idx[w[0]..w[1]];
+                rows.iter().all(|&r| r < n) && rows.windows(2).all(|p| p[0] < p[1])
+            });
+        let nodes_ok = s.col_stride.len() == s.num_blocks
+            && s.diagonal.len() == s.num_blocks
+            && s.offsets.len() == s.num_blocks + 1
+            && s.offsets.last().map(|&o| o as usize) == Some(s.incidences.len());
+        if !(columns_ok && nodes_ok) {
+            return Err(serde::de::Error::custom("the sparse pattern's arrays are inconsistent"));
+        }
+        Ok(SparsePattern {
+            num_blocks: s.num_blocks,
+            symbolic: SymbolicSparseColMat::new_checked(n, n, s.col_ptr, None, s.row_idx),
+            col_stride: s.col_stride,
+            offsets: s.offsets,
+            incidences: s.incidences,
+            slots: s.slots,
+            diagonal: s.diagonal,
+            spare: Buffers::default(),
+        })
+    }
 }
 
 /// The large arrays of a pattern, reused between updates.
@@ -130,6 +196,20 @@ impl SparsePattern {
         let slots = columns.iter().flatten().map(|inc| inc.size as usize).sum();
         let buffers = Buffers::default().with_room(0, incidences, slots);
         Self::lay_out(store, columns.into_iter().map(Column::New).collect(), buffers)
+    }
+
+    /// The pattern of no blocks.
+    pub fn empty() -> Self {
+        SparsePattern {
+            num_blocks: 0,
+            symbolic: SymbolicSparseColMat::new_checked(0, 0, vec![0], None, Vec::new()),
+            col_stride: Vec::new(),
+            offsets: vec![0],
+            incidences: Vec::new(),
+            slots: Vec::new(),
+            diagonal: Vec::new(),
+            spare: Buffers::default(),
+        }
     }
 
     /// Updates the pattern after the entries `changed` (stable ids, sorted)

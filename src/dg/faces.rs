@@ -39,7 +39,7 @@ use crate::store::dg::{DgBasis, Flux, MAX_BASIS};
 
 /// The integrals of one interior face, per pair of local functions
 /// `α = side · m + a` (side 0 is `K⁻`).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct InteriorFace {
     /// The mesh face.
     pub face: u32,
@@ -56,7 +56,7 @@ pub struct InteriorFace {
 }
 
 /// The integrals of one boundary face in a fixed region.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BoundaryFace {
     /// The mesh face.
     pub face: u32,

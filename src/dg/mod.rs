@@ -20,7 +20,7 @@ use rayon::prelude::*;
 pub const MAX_DOUBLINGS: usize = 40;
 
 /// The discontinuous Galerkin discretisation of one body.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct DgElements {
     /// Volume terms and bases, one batch.
     pub store: ElementStore,

@@ -34,7 +34,7 @@ fn nodes_of(faces: &[Face], refs: &[FaceRef]) -> Vec<u32> {
 }
 
 /// A global face: a vertex loop and its triangulation.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Face {
     /// Node ids around the face, counter-clockwise about the face normal.
     pub vertices: Vec<u32>,
@@ -73,7 +73,7 @@ impl Face {
 }
 
 /// One element's reference to a global face.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FaceRef {
     /// Index into [`PolyMesh::faces`].
     pub face: u32,
@@ -82,7 +82,7 @@ pub struct FaceRef {
 }
 
 /// A polyhedral element: its faces and (derived) its sorted node ids.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Element {
     /// The faces bounding this element.
     pub faces: Vec<FaceRef>,
@@ -118,7 +118,7 @@ impl Cell {
 }
 
 /// A conforming mesh of polyhedral elements.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PolyMesh {
     /// Node rest positions in metres.
     pub nodes: Vec<[f64; 3]>,

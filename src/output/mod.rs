@@ -25,6 +25,7 @@ pub enum Format {
 
 /// The pictures of a run (`frame_NNNN.png`): the camera and the original
 /// boundary are taken from the first frame written.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Pictures {
     renderer: Option<Renderer>,
     stress: bool,
@@ -207,7 +208,7 @@ pub struct SolverSummary {
 }
 
 /// Mesh counts at one moment.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct MeshCounts {
     /// Nodes.
     pub nodes: usize,
@@ -275,6 +276,10 @@ pub struct Summary {
     /// the faces the cuts integrated again.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dg: Option<DgSummary>,
+    /// How many times a guard fired in `"warn"` mode.
+    pub guard_warnings: usize,
+    /// The first of those diagnoses.
+    pub guard_warnings_listed: Vec<String>,
 }
 
 /// The discontinuous Galerkin figures of a run.

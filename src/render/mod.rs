@@ -43,6 +43,7 @@ const GROUND_DARK: [f64; 3] = [0.76, 0.76, 0.74];
 const BACKGROUND: [u8; 3] = [250, 250, 250];
 
 /// Renders the frames of one run (see module docs).
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Renderer {
     camera: Camera,
     original: OriginalSurface,
@@ -101,7 +102,7 @@ impl Renderer {
 }
 
 /// An orthographic camera.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 struct Camera {
     center: [f64; 3],
     right: [f64; 3],
@@ -237,6 +238,7 @@ fn ground_tiles(plane: &Plane, points: &[[f64; 3]]) -> Vec<([[f64; 3]; 3], [f64;
 
 /// The first frame's boundary at rest, to tell original faces from cut
 /// ones: triangles hashed by the grid cells their bounding boxes touch.
+#[derive(serde::Serialize, serde::Deserialize)]
 struct OriginalSurface {
     triangles: Vec<[[f64; 3]; 3]>,
     cells: rustc_hash::FxHashMap<[i64; 3], Vec<u32>>,

@@ -9,7 +9,7 @@ mod run;
 mod spec;
 
 pub use render::render_run;
-pub use run::{run_scene, RunOptions};
+pub use run::{resume_run, run_scene, Run, RunOptions, CHECKPOINT_FILE};
 pub use spec::*;
 
 use std::path::{Path, PathBuf};
@@ -52,6 +52,22 @@ pub enum SceneError {
         value: String,
         /// What is allowed.
         allowed: String,
+    },
+    /// A checkpoint could not be written or read.
+    #[error(transparent)]
+    Checkpoint(Box<crate::checkpoint::CheckpointError>),
+    /// A run guard fired (or a step's solve failed): the run stopped at
+    /// its last good state, whose frame and checkpoint are in `dir`.
+    #[error("{}: run stopped: {diagnosis}; the last good state (step {last_good_step}) is in {} as its frame and {}", .path.display(), .dir.display(), run::CHECKPOINT_FILE)]
+    Stopped {
+        /// The scene file.
+        path: PathBuf,
+        /// What fired: step, quantity and bound, elements and nodes.
+        diagnosis: String,
+        /// The last step whose state passed the guards.
+        last_good_step: usize,
+        /// The output folder.
+        dir: PathBuf,
     },
     /// The engine failed while building or running the scene.
     #[error("{}: {source}", .path.display())]

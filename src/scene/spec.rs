@@ -7,7 +7,7 @@ use crate::material::Material;
 use crate::mesh::Plane;
 use crate::output::Format;
 use crate::param::ParamError;
-use crate::sim::{Collider, FixedRegion, SimulationParams};
+use crate::sim::{Collider, FixedRegion, GuardLimits, GuardMode, SimulationParams};
 use crate::solve::SolverKind;
 use crate::store::dg::{DgOptions, Flux as DgFlux};
 use crate::store::{self, BasisOptions, HarmonicOptions, HealthFloors, QuadratureRule};
@@ -44,6 +44,9 @@ pub struct Scene {
     /// Adaptive refinement rules.
     #[serde(default)]
     pub refine: Vec<RefineSpec>,
+    /// The bounds of the run guards (see [`crate::sim::Guards`]).
+    #[serde(default)]
+    pub guards: GuardsSpec,
     /// Output files.
     #[serde(default)]
     pub output: OutputSpec,
@@ -257,6 +260,55 @@ pub struct SimulationSpec {
     /// Initial velocity of every node (m/s).
     #[serde(default)]
     pub velocity: [f64; 3],
+    /// What a dynamic run does when a guard fires: `"stop"` (the
+    /// default: stop with the diagnosis, the last good frame and a
+    /// checkpoint), `"warn"` (report and go on) or `"off"`.
+    #[serde(default)]
+    pub guards: GuardMode,
+}
+
+/// `[guards]`: the bounds of the run guards, each optional.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GuardsSpec {
+    /// Growth of the mechanical energy allowed, as a fraction of the
+    /// energy scale (default 0.1).
+    #[serde(default = "default_energy_growth")]
+    pub energy_growth: f64,
+    /// Fraction of inverted elements allowed (default 0.01).
+    #[serde(default = "default_inverted_fraction")]
+    pub inverted_fraction: f64,
+    /// Largest element stretch allowed (default 5).
+    #[serde(default = "default_stretch")]
+    pub stretch: f64,
+}
+
+fn default_energy_growth() -> f64 {
+    GuardLimits::default().energy_growth
+}
+fn default_inverted_fraction() -> f64 {
+    GuardLimits::default().inverted_fraction
+}
+fn default_stretch() -> f64 {
+    GuardLimits::default().stretch
+}
+
+impl Default for GuardsSpec {
+    fn default() -> Self {
+        let l = GuardLimits::default();
+        GuardsSpec { energy_growth: l.energy_growth, inverted_fraction: l.inverted_fraction, stretch: l.stretch }
+    }
+}
+
+impl GuardsSpec {
+    /// The engine's limits.
+    pub fn limits(&self) -> GuardLimits {
+        GuardLimits {
+            energy_growth: self.energy_growth,
+            inverted_fraction: self.inverted_fraction,
+            stretch: self.stretch,
+        }
+    }
 }
 
 fn default_dt() -> f64 {
@@ -282,6 +334,7 @@ impl Default for SimulationSpec {
             corotated: true,
             damping: DampingSpec::default(),
             velocity: [0.0; 3],
+            guards: GuardMode::Stop,
         }
     }
 }
@@ -559,6 +612,7 @@ fn finite3(v: &[f64; 3]) -> bool {
 impl Scene {
     /// Range checks of every value; errors name the key and its line.
     pub(crate) fn check(&self, s: &LoadedScene) -> Result<(), SceneError> {
+        self.guards.limits().check().map_err(|e| s.param(&format!("guards.{}", e.name), e))?;
         let m = &self.mesh;
         match (&m.file, &m.generator) {
             (Some(_), Some(_)) => {

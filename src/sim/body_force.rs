@@ -72,6 +72,11 @@ pub(super) fn loads(mesh: &PolyMesh, model: &Model, blocks: usize, force: &BodyF
 }
 
 impl Simulation {
+    /// Whether a body force is applied.
+    pub fn has_body_force(&self) -> bool {
+        self.boundary.body.is_some()
+    }
+
     /// Integrates the body force's loads again (after a topology change).
     pub(super) fn refresh_body_loads(&mut self) {
         if let Some(force) = &self.boundary.body {

@@ -7,7 +7,7 @@ use crate::mesh::Plane;
 use crate::param::{finite, non_negative, ParamError};
 
 /// Nodes inside an axis-aligned box held at `u(x) = displacement + gradient x`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FixedRegion {
     /// Box corner (m).
     pub min: [f64; 3],
@@ -53,7 +53,7 @@ impl FixedRegion {
 
 /// A penalty collision plane: nodes behind it are pushed out with force
 /// `stiffness · depth` along its normal.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Collider {
     /// A point on the plane (m).
     pub point: [f64; 3],
@@ -80,7 +80,7 @@ impl Collider {
 }
 
 /// Everything that holds or pushes the body.
-#[derive(Clone, Default)]
+#[derive(Clone, Default, serde::Serialize, serde::Deserialize)]
 pub(crate) struct Boundary {
     /// Dirichlet regions; a later one wins where they overlap.
     pub fixed: Vec<FixedRegion>,
@@ -88,7 +88,10 @@ pub(crate) struct Boundary {
     pub pinned: BTreeMap<u32, [f64; 3]>,
     /// Penalty planes.
     pub colliders: Vec<Collider>,
-    /// A body force density besides gravity.
+    /// A body force density besides gravity: a closure, which no
+    /// checkpoint can hold, so it is not serialized (see
+    /// [`crate::checkpoint`], which refuses a body with one).
+    #[serde(skip)]
     pub body: Option<super::body_force::BodyForce>,
 }
 

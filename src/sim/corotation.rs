@@ -23,7 +23,7 @@ const TASK: usize = 256;
 const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
 
 /// Per-batch state of the warping.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 struct BatchState {
     /// Rotation of each element as a unit quaternion (warm start).
     quaternion: Vec<[f64; 4]>,
@@ -132,7 +132,7 @@ impl BatchState {
 }
 
 /// Rotations, forces and warped blocks of every element.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Corotation {
     batches: Vec<BatchState>,
 }

@@ -7,11 +7,13 @@
 use cleave_kernels::elasticity::{stress, von_mises};
 use cleave_kernels::vec3::{cross, norm, sub};
 
+use rayon::prelude::*;
+
 use super::{Discretization, Model, Simulation};
 use crate::mesh::diameter;
 
 /// A figure and where it was found.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Located {
     /// The value.
     pub value: f64,
@@ -115,21 +117,7 @@ impl Simulation {
     /// The largest stretch of an element: its deformed diameter over its
     /// rest diameter (1 for a rigid motion), and the element.
     pub fn worst_stretch(&self) -> Located {
-        let (mesh, x) = (&self.mesh, self.positions());
-        let mut worst = Located { value: 1.0, at: 0 };
-        let mut rest = Vec::new();
-        let mut now = Vec::new();
-        for (e, el) in mesh.elements.iter().enumerate() {
-            rest.clear();
-            now.clear();
-            rest.extend(el.nodes.iter().map(|&v| mesh.nodes[v as usize]));
-            now.extend(el.nodes.iter().map(|&v| x[v as usize]));
-            let stretch = diameter(&now) / diameter(&rest);
-            if stretch > worst.value {
-                worst = Located { value: stretch, at: e };
-            }
-        }
-        worst
+        ShapeExtremes::of(self).stretch
     }
 
     /// The fastest node: its speed (m/s) and id.
@@ -189,6 +177,16 @@ impl Simulation {
     /// over the nodes at depth `d` behind a collider (J).
     pub fn contact_energy(&self) -> f64 {
         let mut e = 0.0;
+        self.contact_depths(|_, depth, stiffness| e += 0.5 * stiffness * depth * depth);
+        e
+    }
+
+    /// Calls `f(index, depth, stiffness)` for every collision point behind
+    /// a collider (`index` numbers the pairs of collider and point, collider
+    /// after collider; `stiffness` is the point's share of the collider's,
+    /// N/m): the nodes, or the collision points of a discretisation whose
+    /// blocks are not nodes.
+    pub(super) fn contact_depths(&self, mut f: impl FnMut(usize, f64, f64)) {
         let mut points = Vec::new();
         let (positions, share): (&[[f64; 3]], Option<&[f64]>) = match &self.contacts {
             None => (&self.state.position, None),
@@ -197,15 +195,14 @@ impl Simulation {
                 (&points, Some(share))
             }
         };
-        for c in &self.boundary.colliders {
+        for (c, collider) in self.boundary.colliders.iter().enumerate() {
             for (p, x) in positions.iter().enumerate() {
-                let d = c.depth(*x);
+                let d = collider.depth(*x);
                 if d > 0.0 {
-                    e += 0.5 * c.stiffness * share.map_or(1.0, |s| s[p]) * d * d;
+                    f(c * positions.len() + p, d, collider.stiffness * share.map_or(1.0, |s| s[p]));
                 }
             }
         }
-        e
     }
 
     /// Total mechanical energy: kinetic, elastic, gravity and contact (J).
@@ -219,5 +216,72 @@ impl Simulation {
     /// The largest distance a node has moved from its rest position (m).
     pub fn max_displacement(&self) -> f64 {
         self.mesh.nodes.iter().zip(self.positions()).map(|(x0, x)| norm(sub(*x, *x0))).fold(0.0, f64::max)
+    }
+}
+
+/// The elements of extreme shape: the inverted ones (deformed volume over
+/// their face triangles not positive) and the most stretched one.
+pub(super) struct ShapeExtremes {
+    /// How many elements have a non-positive deformed volume.
+    pub inverted_count: usize,
+    /// The first [`super::guards::NAMED`] of them.
+    pub inverted: Vec<usize>,
+    /// The largest stretch and its element.
+    pub stretch: Located,
+}
+
+/// Elements per parallel task.
+const TASK: usize = 1024;
+
+impl ShapeExtremes {
+    /// One pass over the elements at the current node positions; the same
+    /// result on any number of threads (chunks are combined in order).
+    pub(super) fn of(sim: &Simulation) -> Self {
+        let (mesh, x) = (sim.mesh(), sim.positions());
+        let chunks: Vec<(Vec<usize>, usize, Located)> = (0..mesh.elements.len())
+            .collect::<Vec<_>>()
+            .par_chunks(TASK)
+            .map(|chunk| {
+                let (mut inverted, mut count) = (Vec::new(), 0);
+                let mut worst = Located { value: 1.0, at: 0 };
+                let (mut rest, mut now) = (Vec::new(), Vec::new());
+                for &e in chunk {
+                    let el = &mesh.elements[e];
+                    let origin = x[el.nodes[0] as usize];
+                    let volume: f64 = mesh
+                        .element_triangles(e)
+                        .map(|t| {
+                            let p = |i: usize| x[t[i] as usize];
+                            cleave_kernels::tet::signed_volume(origin, p(0), p(1), p(2))
+                        })
+                        .sum();
+                    if !(volume > 0.0) {
+                        count += 1;
+                        if inverted.len() < super::guards::NAMED {
+                            inverted.push(e);
+                        }
+                    }
+                    rest.clear();
+                    now.clear();
+                    rest.extend(el.nodes.iter().map(|&v| mesh.nodes[v as usize]));
+                    now.extend(el.nodes.iter().map(|&v| x[v as usize]));
+                    let stretch = diameter(&now) / diameter(&rest);
+                    if !(stretch <= worst.value) {
+                        worst = Located { value: stretch, at: e };
+                    }
+                }
+                (inverted, count, worst)
+            })
+            .collect();
+        let mut out = ShapeExtremes { inverted_count: 0, inverted: Vec::new(), stretch: Located { value: 1.0, at: 0 } };
+        for (inverted, count, worst) in chunks {
+            out.inverted_count += count;
+            out.inverted
+                .extend(inverted.into_iter().take(super::guards::NAMED - out.inverted.len().min(super::guards::NAMED)));
+            if !(worst.value <= out.stretch.value) {
+                out.stretch = worst;
+            }
+        }
+        out
     }
 }

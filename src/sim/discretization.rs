@@ -40,7 +40,7 @@ pub trait Discretization: Couplings {
 
 /// The nodal families: the element store and the corotation state of its
 /// elements.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct NodalElements {
     /// Element data, batched by vertex count.
     pub store: ElementStore,
@@ -88,7 +88,7 @@ impl Discretization for NodalElements {
 }
 
 /// The discretisation of a body: one of the families.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub enum Model {
     /// Nodal elements (tetrahedra, mean value, harmonic, trilinear).
     Nodal(NodalElements),

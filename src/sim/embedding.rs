@@ -35,7 +35,7 @@ use crate::store::ElementStore;
 use crate::Error;
 
 /// A triangle surface embedded in the body, in rest coordinates (m).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EmbeddedSurface {
     /// Vertex positions at rest (m).
     pub vertices: Vec<[f64; 3]>,

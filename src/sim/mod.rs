@@ -25,6 +25,7 @@ mod corotation;
 mod diagnostics;
 mod discretization;
 pub mod embedding;
+mod guards;
 mod params;
 mod points;
 mod rebuild;
@@ -41,6 +42,7 @@ pub use corotation::Corotation;
 pub use diagnostics::Located;
 pub use discretization::{Discretization, Model, NodalElements};
 pub use embedding::EmbeddedSurface;
+pub use guards::{GuardLimits, GuardMode, GuardTrip, Guards};
 pub use params::{SimulationParams, CUT_ATTEMPTS};
 pub use points::PointMap;
 pub use refine::{principal, RefineReport, RefineRule, RefineSplit};
@@ -72,6 +74,13 @@ use crate::Error;
 /// static solve in `statics.rs`, topology changes in `rebuild.rs`,
 /// read-back figures in `diagnostics.rs`; the elements are reached through
 /// [`Discretization`].
+///
+/// A simulation serializes (serde) to everything its future steps depend
+/// on, bit for bit: the mesh after cuts, element data, rotations, pattern,
+/// state and counters ([`crate::checkpoint`] writes it). The solvers are
+/// not stored: they are rebuilt from the pattern on the first step or
+/// static solve after deserialization, as after a cut.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Simulation {
     /// The mesh in its rest configuration.
     mesh: PolyMesh,
@@ -101,9 +110,12 @@ pub struct Simulation {
     embedded: Option<(EmbeddedSurface, PointMap)>,
     /// Outward triangles of the boundary surface (node ids), per topology.
     surface: Vec<[u32; 3]>,
-    /// The step's system, solver and buffers.
+    /// The step's system, solver and buffers (empty after
+    /// deserialization until the first step).
+    #[serde(skip)]
     system: StepSystem,
     /// The static problem's solver, made on first use.
+    #[serde(skip)]
     statics: Option<StaticSystem>,
     steps: usize,
     /// Cuts run again with one more element kept whole (see
@@ -117,9 +129,42 @@ pub struct Simulation {
     timings: PhaseTimings,
 }
 
+/// A copy of a simulation's state (displacements, positions, velocities
+/// and the step count), to undo the steps taken since it was saved, as
+/// long as the topology has not changed.
+#[derive(Clone, Debug, Default)]
+pub struct SavedState {
+    state: NodeState,
+    steps: usize,
+}
+
+impl SavedState {
+    /// Copies `sim`'s state (reusing this copy's memory).
+    pub fn save(&mut self, sim: &Simulation) {
+        self.state.clone_from(&sim.state);
+        self.steps = sim.steps;
+    }
+
+    /// Puts the saved state back into `sim`; an error if `sim`'s topology
+    /// changed since (its number of blocks differs).
+    pub fn restore(&self, sim: &mut Simulation) -> Result<(), Error> {
+        if self.state.velocity.len() != sim.state.velocity.len() {
+            let message =
+                format!("a state of {} blocks restored into {}", self.state.velocity.len(), sim.state.velocity.len());
+            return Err(Error::Internal(message));
+        }
+        sim.state.clone_from(&self.state);
+        sim.steps = self.steps;
+        if !sim.nodal() {
+            sim.nodes.refresh(&sim.state);
+        }
+        Ok(())
+    }
+}
+
 /// Per-node positions, displacements and velocities read from blocks that
 /// are not nodes, through a point map.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 struct NodeView {
     map: PointMap,
     position: Vec<[f64; 3]>,

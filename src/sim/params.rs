@@ -11,7 +11,7 @@ use crate::topology::SplitOptions;
 pub const CUT_ATTEMPTS: usize = 16;
 
 /// Physical and numerical parameters of a simulation.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SimulationParams {
     /// The material of every element.
     pub material: Material,

@@ -5,7 +5,7 @@
 //! kaufmann2008 eq. 17) or at element vertices (collision points).
 
 /// A sparse map from blocks to points (compressed rows).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PointMap {
     /// Row offsets into `blocks` and `weights`, one row per point.
     pub offsets: Vec<u32>,

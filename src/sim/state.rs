@@ -1,7 +1,7 @@
 //! The state of the nodes: displacement, position and velocity.
 
 /// Per-node state of a body (one entry per mesh node).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub(crate) struct NodeState {
     /// Displacement from the rest position (m).
     pub displacement: Vec<[f64; 3]>,

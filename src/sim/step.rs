@@ -57,6 +57,13 @@ pub(crate) struct StepSystem {
     frame_sums: Vec<[f64; 4]>,
 }
 
+impl Default for StepSystem {
+    /// An empty system (of no unknowns), replaced on the first step.
+    fn default() -> Self {
+        StepSystem::new(SolverKind::default(), &SparsePattern::empty(), 1e-8, 1)
+    }
+}
+
 impl StepSystem {
     /// A system for `pattern` solved by `kind`.
     pub fn new(kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) -> Self {
@@ -75,6 +82,12 @@ impl StepSystem {
             frames: Vec::new(),
             frame_sums: Vec::new(),
         }
+    }
+
+    /// Whether this system was made for `pattern` (a deserialized
+    /// simulation's is empty).
+    fn fits(&self, pattern: &SparsePattern) -> bool {
+        self.values.len() == pattern.nnz() && self.force.len() == pattern.num_blocks
     }
 
     /// Analyses the pattern once per topology (time booked under
@@ -106,6 +119,10 @@ impl Simulation {
     }
 
     fn advance(&mut self) -> Result<StepStats, SolveError> {
+        if !self.system.fits(&self.pattern) {
+            let p = &self.params;
+            self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        }
         let h = self.params.dt;
         let (c_k, c_m) = (h * h + h * self.params.stiffness_damping, 1.0 + h * self.params.mass_damping);
         let (pattern, system, timings) = (&self.pattern, &mut self.system, &mut self.timings);

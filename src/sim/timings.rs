@@ -27,7 +27,7 @@ pub enum Phase {
 }
 
 /// Accumulated seconds per phase.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PhaseTimings {
     /// Basis functions, quadrature and element matrices (s).
     pub basis: f64,

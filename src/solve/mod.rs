@@ -88,7 +88,7 @@ pub trait LinearSolver: Send + Sync {
 }
 
 /// The solvers a simulation can use.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SolverKind {
     /// [`SolverKind::Cholesky`] up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`]
     /// unknowns, CG above (measured with `cleave bench`: on the 100k-tet

@@ -45,7 +45,7 @@ use crate::param::ParamError;
 pub const MAX_BASIS: usize = count(2);
 
 /// How the faces glue the elements (kaufmann2008 §4).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Flux {
     /// Interior penalty: consistent, symmetric, stable for a large enough
     /// penalty (doubled from the given one until the system is positive
@@ -58,7 +58,7 @@ pub enum Flux {
 }
 
 /// Options of the discontinuous Galerkin family.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DgOptions {
     /// Polynomial degree, 1 (4 functions) or 2 (10).
     pub degree: usize,
@@ -96,7 +96,7 @@ impl DgOptions {
 }
 
 /// One face of an element with its moments in the element's frame.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FaceMoments {
     /// The mesh face.
     pub face: u32,
@@ -110,13 +110,14 @@ pub struct FaceMoments {
 }
 
 /// The orthonormal polynomial basis of one element (see the module docs).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DgBasis {
     /// Centre `c` (m) and scale `s` (m): `ξ = (x - c) / s`.
     pub frame: [f64; 4],
     /// Number of basis functions `m`.
     pub size: usize,
     /// `C` (row-major, `m x m`, lower triangular): `N_i = Σ_j C_ij P_j`.
+    #[serde(with = "serde_big_array::BigArray")]
     pub coefficients: [f64; MAX_BASIS * MAX_BASIS],
     /// The element's faces and their moments.
     pub faces: Vec<FaceMoments>,

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::{BasisError, Batch, ElementKind};
 
 /// Floors every built element must meet.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HealthFloors {
     /// Smallest `λ₇ / λ_max` of an element stiffness. Default `1e-6`.
     pub stiffness_ratio: f64,

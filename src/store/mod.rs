@@ -125,7 +125,7 @@ impl BasisError {
 }
 
 /// How the elements of a batch are represented.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
 pub enum ElementKind {
     /// Closed-form linear tetrahedra (no stored `K_e`).
     #[default]
@@ -143,7 +143,7 @@ pub enum ElementKind {
 }
 
 /// The shape function family of the elements other than tetrahedra.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Family {
     /// Mean value coordinates; every element must be convex.
     #[default]
@@ -156,7 +156,7 @@ pub enum Family {
 }
 
 /// All elements with `k` nodes, as structure of arrays.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Batch {
     /// Nodes per element.
     pub k: usize,
@@ -345,7 +345,7 @@ impl Batch {
 }
 
 /// How mean value elements are integrated (wicke2007 §3.4 and beyond).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum QuadratureRule {
     /// The paper's points and weights with the per-element gradient
     /// correction that makes the discrete divergence theorem exact, so the
@@ -360,7 +360,7 @@ pub enum QuadratureRule {
 }
 
 /// Options of the basis construction.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BasisOptions {
     /// Family of the elements that are not tetrahedra.
     pub family: Family,
@@ -399,7 +399,7 @@ pub struct StoreChanges {
 }
 
 /// Every element of a mesh, batched by vertex count.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct ElementStore {
     /// Batches, one per `(kind, k)`: in increasing `(kind, k)` when built,
     /// batches that later updates need are appended.

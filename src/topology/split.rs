@@ -39,7 +39,7 @@ use thiserror::Error;
 use crate::mesh::{diameter, fold_depth, quality, Face, FaceRef, Plane, PolyMesh};
 
 /// Tolerances of a split.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SplitOptions {
     /// Snapping radius, as a fraction of the diameter of the smallest crossed
     /// element holding a node: a node closer to the plane lies on it.

@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 mod bench;
 
 use cleave::mesh::ValidationOptions;
-use cleave::scene::{run_scene, LoadedScene, RunOptions};
+use cleave::scene::{resume_run, run_scene, LoadedScene, RunOptions};
 
 #[derive(Parser)]
 #[command(name = "cleave", version, about = "Elastic solids on polyhedral finite elements")]
@@ -30,6 +30,19 @@ enum Command {
         #[arg(long)]
         steps: Option<usize>,
         /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Write OUT/checkpoint.bin every N steps (dynamic scenes), to
+        /// carry the run on with `cleave resume`.
+        #[arg(long, value_name = "N")]
+        checkpoint_every: Option<usize>,
+    },
+    /// Carry a run on from its checkpoint (bit for bit as if it had not
+    /// stopped), into the same output folder.
+    Resume {
+        /// The checkpoint (OUT/checkpoint.bin).
+        checkpoint: PathBuf,
+        /// Worker threads (default: all cores; results do not depend on it).
         #[arg(long)]
         threads: Option<usize>,
     },
@@ -79,21 +92,17 @@ fn in_pool<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> 
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
-        Command::Run { scene, out, steps, threads } => {
+        Command::Run { scene, out, steps, threads, checkpoint_every } => {
             let loaded = LoadedScene::load(&scene).map_err(|e| e.to_string())?;
-            let opts = RunOptions { out, steps };
+            let opts = RunOptions { out, steps, checkpoint_every };
             let dir = loaded.output_dir(&opts);
             let summary = in_pool(threads, || run_scene(&loaded, &opts))?.map_err(|e| e.to_string())?;
-            println!(
-                "{}: {} nodes, {} elements, {} step(s) in {:.3} s; max displacement {:.6e} m; output in {}",
-                scene.display(),
-                summary.end.nodes,
-                summary.end.elements,
-                summary.steps,
-                summary.wall_time_total,
-                summary.max_displacement,
-                dir.display()
-            );
+            report(&summary, &dir);
+            Ok(())
+        }
+        Command::Resume { checkpoint, threads } => {
+            let summary = in_pool(threads, || resume_run(&checkpoint))?.map_err(|e| e.to_string())?;
+            report(&summary, checkpoint.parent().unwrap_or(std::path::Path::new(".")));
             Ok(())
         }
         Command::Render { dir, stress } => {
@@ -149,6 +158,23 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
+    }
+}
+
+/// The line a finished run prints.
+fn report(summary: &cleave::output::Summary, dir: &std::path::Path) {
+    println!(
+        "{}: {} nodes, {} elements, {} step(s) in {:.3} s; max displacement {:.6e} m; output in {}",
+        summary.scene,
+        summary.end.nodes,
+        summary.end.elements,
+        summary.steps,
+        summary.wall_time_total,
+        summary.max_displacement,
+        dir.display()
+    );
+    if summary.guard_warnings > 0 {
+        println!("  {} guard warning(s); the first: {}", summary.guard_warnings, summary.guard_warnings_listed[0]);
     }
 }
 

@@ -41,7 +41,7 @@ use crate::material::Material;
 use crate::mesh::PolyMesh;
 
 /// Parameters of the MFS fit and of the quadrature of harmonic elements.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HarmonicOptions {
     /// Offset `ξ` of the kernel centres outside the boundary, relative to
     /// the element (or face) diameter (martin2008 eq. 12; 0.1).
