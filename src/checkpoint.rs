@@ -110,7 +110,7 @@ pub fn write<T: serde::Serialize>(path: &Path, state: &T) -> Result<(), Checkpoi
     std::fs::rename(&temporary, path).map_err(io)
 }
 
-/// Reads a checkpoint written by [`write`].
+/// Reads a checkpoint written by [`write()`].
 pub fn read<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CheckpointError> {
     let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io { path: path.to_path_buf(), source })?;
     decode(path, &bytes)
