@@ -1,91 +1,174 @@
-//! gmsh `.msh` 4.1 ASCII: tetrahedra (type 4) and hexahedra (type 5).
-//! Reading goes through the `mshio` crate; lower-dimensional elements
-//! (boundary triangles, lines, points) are skipped.
+//! gmsh `.msh` 4.1 ASCII: tetrahedra (type 4) and hexahedra (type 5);
+//! lower-dimensional elements (boundary triangles, lines, points) are
+//! skipped, as are sections other than `$MeshFormat`, `$Nodes` and
+//! `$Elements`. Read by hand with the line-numbering tokenizer: every
+//! error names its line, and no count in the file reserves memory beyond
+//! what the rest of the file can hold.
 
 use std::collections::HashMap;
 use std::fmt::Write;
 use std::path::Path;
 
-use super::{write_text, IoError};
+use super::tokens::Tokens;
+use super::{read_text, write_text, IoError};
 use crate::mesh::{Cell, PolyMesh};
 
-/// Reads the volume elements of a gmsh 4.1 mesh.
+/// Nodes per element of the gmsh element types read (volume) or skipped
+/// (points, lines, triangles, quadrangles, first and second order).
+fn nodes_per_element(kind: usize) -> Option<usize> {
+    Some(match kind {
+        15 => 1,
+        1 => 2,
+        2 | 8 => 3,
+        3 | 4 | 26 => 4,
+        9 => 6,
+        5 | 16 => 8,
+        21 => 10,
+        _ => return None,
+    })
+}
+
+/// Reads the volume elements of a gmsh 4.1 ASCII mesh.
 pub fn read_gmsh(path: &Path) -> Result<PolyMesh, IoError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::os(path, e))?;
-    let msh = mshio::parse_msh_bytes(&bytes).map_err(|e| {
-        let msg = e.to_string();
-        let line = first_line_number(&msg).unwrap_or(1);
-        IoError::parse(path, line, format!("not a valid gmsh 4.1 file: {}", msg.lines().next().unwrap_or("")))
-    })?;
-    let Some(node_sec) = msh.data.nodes else {
-        return Err(IoError::unsupported(path, "no $Nodes section"));
-    };
-    let Some(elem_sec) = msh.data.elements else {
-        return Err(IoError::unsupported(path, "no $Elements section"));
-    };
-    // node tag -> index
-    let mut nodes: Vec<[f64; 3]> = Vec::new();
-    let mut tag_of: HashMap<u64, u32> = HashMap::new();
-    let dense = node_sec.node_blocks.iter().all(|b| b.node_tags.is_none());
-    for block in &node_sec.node_blocks {
-        let start = nodes.len();
-        for (i, nd) in block.nodes.iter().enumerate() {
-            let p = [nd.x, nd.y, nd.z];
-            if !p.iter().all(|x| x.is_finite()) {
-                return Err(IoError::unsupported(path, format!("node {} has a non-finite coordinate", start + i + 1)));
-            }
-            nodes.push(p);
-        }
-        if let Some(tags) = &block.node_tags {
-            for (&tag, &local) in tags {
-                tag_of.insert(tag, (start + local) as u32);
-            }
-        }
+    if std::str::from_utf8(&bytes).is_err() {
+        return Err(IoError::unsupported(path, "not a text file: binary .msh is not supported (save as ASCII 4.1)"));
     }
-    let min_tag = node_sec.min_node_tag;
-    let index = |tag: u64| -> Option<u32> {
-        if dense {
-            tag.checked_sub(min_tag).filter(|&i| (i as usize) < nodes.len()).map(|i| i as u32)
-        } else {
-            tag_of.get(&tag).copied()
-        }
-    };
-    let mut cells = Vec::new();
-    for block in &elem_sec.element_blocks {
-        let kind = block.element_type as i32;
-        for el in &block.elements {
-            let mut ids = Vec::with_capacity(el.nodes.len());
-            for &tag in &el.nodes {
-                ids.push(index(tag).ok_or_else(|| {
-                    IoError::unsupported(
-                        path,
-                        format!("element {} refers to node tag {tag}, which does not exist", el.element_tag),
-                    )
-                })?);
-            }
-            match kind {
-                4 => cells.push(Cell::Tet([ids[0], ids[1], ids[2], ids[3]])),
-                5 => cells.push(Cell::Hex(std::array::from_fn(|i| ids[i]))),
-                // points, lines, triangles, quadrangles: boundary entities
-                15 | 1 | 2 | 3 | 8 | 9 | 16 | 26 | 21 => {}
-                other => {
-                    return Err(IoError::unsupported(
-                        path,
-                        format!("gmsh element type {other} is not supported (linear tetrahedra 4 and hexahedra 5 are)"),
-                    ))
+    let text = read_text(path)?;
+    let mut t = Tokens::new(path, &text);
+    let (mut nodes, mut tag_of): (Vec<[f64; 3]>, HashMap<usize, u32>) = (Vec::new(), HashMap::new());
+    let (mut cells, mut format_seen, mut elements_seen) = (Vec::new(), false, false);
+    while let Some(section) = t.peek() {
+        t.next("a section")?;
+        match section {
+            "$MeshFormat" => {
+                let line = t.line();
+                let version = t.next("the format version")?;
+                let binary = t.usize("the file type")?;
+                t.usize("the data size")?;
+                if !version.starts_with("4.") {
+                    return Err(IoError::parse(path, line, format!("gmsh format {version} is not supported (4.1 is)")));
                 }
+                if binary != 0 {
+                    return Err(IoError::parse(path, line, "binary .msh is not supported (save as ASCII 4.1)"));
+                }
+                expect(&mut t, "$EndMeshFormat")?;
+                format_seen = true;
+            }
+            "$Nodes" if format_seen => {
+                read_nodes(&mut t, &mut nodes, &mut tag_of)?;
+                expect(&mut t, "$EndNodes")?;
+            }
+            "$Elements" if format_seen => {
+                read_elements(&mut t, &tag_of, &mut cells)?;
+                expect(&mut t, "$EndElements")?;
+                elements_seen = true;
+            }
+            other if other.starts_with('$') && !other.starts_with("$End") && format_seen => {
+                let end = format!("$End{}", &other[1..]);
+                while t.next(&end)? != end {}
+            }
+            other => {
+                let expected = if format_seen { "a section ($Nodes, $Elements, ...)" } else { "$MeshFormat first" };
+                return Err(t.error(format!("expected {expected}, found '{other}'")));
             }
         }
     }
-    if cells.is_empty() {
+    if !format_seen {
+        return Err(IoError::unsupported(path, "no $MeshFormat section: not a gmsh file"));
+    }
+    if !elements_seen || cells.is_empty() {
         return Err(IoError::unsupported(path, "no tetrahedra or hexahedra: not a volume mesh"));
     }
     PolyMesh::from_cells(nodes, &cells).map_err(|e| IoError::mesh(path, e))
 }
 
-fn first_line_number(msg: &str) -> Option<usize> {
-    let i = msg.find("line ")?;
-    msg[i + 5..].split(|c: char| !c.is_ascii_digit()).next()?.parse().ok()
+/// The next token must be `end`.
+fn expect(t: &mut Tokens, end: &str) -> Result<(), IoError> {
+    let found = t.next(end)?;
+    if found != end {
+        return Err(t.error(format!("expected {end}, found '{found}'")));
+    }
+    Ok(())
+}
+
+/// `$Nodes`: blocks of tags, then coordinates.
+fn read_nodes(t: &mut Tokens, nodes: &mut Vec<[f64; 3]>, tag_of: &mut HashMap<usize, u32>) -> Result<(), IoError> {
+    let blocks = t.usize("the number of node blocks")?;
+    let total = t.usize("the number of nodes")?;
+    t.usize("the smallest node tag")?;
+    t.usize("the largest node tag")?;
+    nodes.reserve(t.capacity(total, 4));
+    for _ in 0..blocks {
+        let dim = t.usize("the entity dimension")?;
+        t.usize("the entity tag")?;
+        let parametric = t.usize("the parametric flag")?;
+        let count = t.usize("the number of nodes in the block")?;
+        let mut tags = Vec::with_capacity(t.capacity(count, 4));
+        for _ in 0..count {
+            tags.push(t.usize("a node tag")?);
+        }
+        for tag in tags {
+            let line = t.line();
+            let p = [t.f64("x")?, t.f64("y")?, t.f64("z")?];
+            for _ in 0..if parametric == 1 { dim } else { 0 } {
+                t.f64("a parametric coordinate")?;
+            }
+            let index = u32::try_from(nodes.len()).map_err(|_| t.error("more than 2^32 nodes"))?;
+            if tag_of.insert(tag, index).is_some() {
+                return Err(IoError::parse(t.path(), line, format!("node tag {tag} appears twice")));
+            }
+            nodes.push(p);
+        }
+    }
+    if nodes.len() != total {
+        return Err(t.error(format!("{} nodes in the blocks, the header says {total}", nodes.len())));
+    }
+    Ok(())
+}
+
+/// `$Elements`: blocks of one element type each.
+fn read_elements(t: &mut Tokens, tag_of: &HashMap<usize, u32>, cells: &mut Vec<Cell>) -> Result<(), IoError> {
+    let blocks = t.usize("the number of element blocks")?;
+    t.usize("the number of elements")?;
+    t.usize("the smallest element tag")?;
+    t.usize("the largest element tag")?;
+    for _ in 0..blocks {
+        t.usize("the entity dimension")?;
+        t.usize("the entity tag")?;
+        let line = t.line();
+        let kind = t.usize("the element type")?;
+        let count = t.usize("the number of elements in the block")?;
+        let Some(per) = nodes_per_element(kind) else {
+            let message =
+                format!("gmsh element type {kind} is not supported (linear tetrahedra 4 and hexahedra 5 are)");
+            return Err(IoError::parse(t.path(), line, message));
+        };
+        if matches!(kind, 4 | 5) {
+            cells.reserve(t.capacity(count, per + 1));
+        }
+        let mut ids = [0u32; 8];
+        for _ in 0..count {
+            let element = t.usize("an element tag")?;
+            for id in ids.iter_mut().take(per.min(8)) {
+                let line = t.line();
+                let tag = t.usize("a node tag")?;
+                *id = *tag_of.get(&tag).ok_or_else(|| {
+                    let message = format!("element {element} refers to node tag {tag}, which does not exist");
+                    IoError::parse(t.path(), line, message)
+                })?;
+            }
+            for _ in 8..per {
+                t.usize("a node tag")?;
+            }
+            match kind {
+                4 => cells.push(Cell::Tet([ids[0], ids[1], ids[2], ids[3]])),
+                5 => cells.push(Cell::Hex(ids)),
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Writes tetrahedra and hexahedra as gmsh 4.1 ASCII (one volume entity).

@@ -3,7 +3,7 @@
 //! | format | read | write |
 //! |---|---|---|
 //! | Medit `.mesh` (tetrahedra, hexahedra) | yes | yes |
-//! | gmsh `.msh` 4.1 ASCII (tetrahedra, hexahedra) | yes (mshio) | yes |
+//! | gmsh `.msh` 4.1 ASCII (tetrahedra, hexahedra) | yes | yes |
 //! | TetGen `.node` + `.ele` | yes | yes |
 //! | VTK `.vtu` (tetra, hexahedron, polyhedron) | yes | yes |
 //! | Wavefront `.obj` triangle surface | yes (tobj) | boundary surface |

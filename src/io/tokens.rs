@@ -32,6 +32,11 @@ impl<'a> Tokens<'a> {
         count.min((self.items.len() - self.pos) / per.max(1))
     }
 
+    /// The file being read.
+    pub fn path(&self) -> &'a Path {
+        self.path
+    }
+
     /// Line of the next token (or of the last one at the end of the file).
     pub fn line(&self) -> usize {
         self.items.get(self.pos).or(self.items.last()).map_or(1, |t| t.0)
