@@ -272,7 +272,8 @@ impl Simulation {
 #[pyo3(signature = (scene, out=None, steps=None))]
 fn run_scene(py: Python<'_>, scene: PathBuf, out: Option<PathBuf>, steps: Option<usize>) -> PyResult<Py<PyAny>> {
     let loaded = LoadedScene::load(&scene).map_err(err)?;
-    let summary = py.detach(|| run_scene_file(&loaded, &RunOptions { out, steps, ..Default::default() })).map_err(err)?;
+    let summary =
+        py.detach(|| run_scene_file(&loaded, &RunOptions { out, steps, ..Default::default() })).map_err(err)?;
     let json = serde_json::to_string(&summary).map_err(err)?;
     let loads = py.import("json")?.getattr("loads")?;
     Ok(loads.call1((json,))?.unbind())
