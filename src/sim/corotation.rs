@@ -68,16 +68,29 @@ impl BatchState {
         }
     }
 
-    /// The rotation (row-major) of entry `i` of batch `b` at positions `x`
-    /// (m), warm-started from the stored one, without storing it; the
-    /// identity if not `warp`.
-    fn rotation_at(&self, b: &Batch, i: usize, x: &[[f64; 3]], warp: bool) -> [f64; 9] {
-        if !warp {
-            return IDENTITY;
+    /// The deformation gradients and rotations (both row-major) of every
+    /// entry of batch `b` at positions `x` (m), the rotations warm-started
+    /// from the stored ones (SIMD over elements, as in a step) without
+    /// storing them; identities if not `warp`.
+    fn rotations_at(&self, b: &Batch, x: &[[f64; 3]], warp: bool) -> (Vec<[f64; 9]>, Vec<[f64; 9]>) {
+        let k = b.k;
+        let mut gradients = vec![IDENTITY; b.len()];
+        gradients
+            .par_chunks_mut(TASK)
+            .zip(b.nodes.par_chunks(TASK * k))
+            .zip(b.stress_grads.par_chunks(TASK * k))
+            .for_each(|((f, nodes), grads)| deformation_gradients(k, nodes, x, grads, f));
+        let mut rotations = vec![IDENTITY; b.len()];
+        if warp {
+            let mut q = self.quaternion.clone();
+            rotations.par_chunks_mut(TASK).zip(q.par_chunks_mut(TASK)).zip(gradients.par_chunks(TASK)).for_each(
+                |((r, q), f)| {
+                    polar_rotations(f, q);
+                    r.iter_mut().zip(q.iter()).for_each(|(r, q)| *r = rotation_matrix(*q));
+                },
+            );
         }
-        let mut q = [self.quaternion[i]];
-        polar_rotations(&[b.field_gradient(i, x)], &mut q);
-        rotation_matrix(q[0])
+        (gradients, rotations)
     }
 
     /// Deformation gradients, rotations (if `warp`), forces and, for
@@ -224,11 +237,17 @@ impl Corotation {
         }));
     }
 
-    /// Rotation (row-major) of entry `i` of batch `batch` of `store` at
-    /// positions `x` (m): extracted there, warm-started from the stored
-    /// one (the identity if not `warp`).
-    pub fn rotation_at(&self, store: &ElementStore, batch: usize, i: usize, x: &[[f64; 3]], warp: bool) -> [f64; 9] {
-        self.batches[batch].rotation_at(&store.batches[batch], i, x, warp)
+    /// The deformation gradients and rotations (row-major) of every entry
+    /// of batch `batch` of `store` at positions `x` (m): rotations extracted
+    /// there, warm-started from the stored ones (identities if not `warp`).
+    pub fn rotations_at(
+        &self,
+        store: &ElementStore,
+        batch: usize,
+        x: &[[f64; 3]],
+        warp: bool,
+    ) -> (Vec<[f64; 9]>, Vec<[f64; 9]>) {
+        self.batches[batch].rotations_at(&store.batches[batch], x, warp)
     }
 
     /// Elastic force on local node `a` of entry `i` of batch `batch` (N).
@@ -269,12 +288,30 @@ impl Corotation {
     /// the stored one; the identity if not `warp`): a step leaves the
     /// rotations of the positions it started from, which would misstate
     /// the energy of a body turning fast.
+    ///
+    /// A linear tetrahedron's strain is constant, so its energy is
+    /// `V (μ ε:ε + ½ λ (tr ε)²)` with `ε = sym(Rᵀ F) - I`, the same
+    /// quadratic form without assembling `K_e`.
     pub fn energy(&self, store: &ElementStore, x: &[[f64; 3]], warp: bool) -> f64 {
         use cleave_kernels::corotation::MAX_NODES;
         let per_batch = |(b, st): (&Batch, &BatchState)| -> f64 {
             let k = b.k;
+            let (gradients, rotations) = st.rotations_at(b, x, warp);
+            let (lambda, mu) = b.lame;
             let element = |i: usize| -> f64 {
-                let r = st.rotation_at(b, i, x, warp);
+                let r = &rotations[i];
+                if b.is_tet() {
+                    let f = &gradients[i];
+                    // ε = sym(Rᵀ F) - I
+                    let rf: [[f64; 3]; 3] = std::array::from_fn(|p| {
+                        std::array::from_fn(|q| r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q])
+                    });
+                    let strain = |p: usize, q: usize| 0.5 * (rf[p][q] + rf[q][p]) - f64::from(p == q);
+                    let trace = strain(0, 0) + strain(1, 1) + strain(2, 2);
+                    let contracted: f64 =
+                        (0..3).flat_map(|p| (0..3).map(move |q| (p, q))).map(|(p, q)| strain(p, q).powi(2)).sum();
+                    return b.volume[i] * (mu * contracted + 0.5 * lambda * trace * trace);
+                }
                 let (mut u, mut f) = ([[0.0; 3]; MAX_NODES], [[0.0; 3]; MAX_NODES]);
                 for a in 0..k {
                     let xa = x[b.nodes[i * k + a] as usize];

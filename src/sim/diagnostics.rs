@@ -37,9 +37,8 @@ impl Simulation {
         let (x, store, corotation) = (&self.state.position, self.elements.store(), self.elements.corotation());
         let mut out = vec![[0.0; 6]; self.mesh.elements.len()];
         for (bi, b) in store.batches.iter().enumerate() {
-            for i in 0..b.len() {
-                let r = corotation.rotation_at(store, bi, i, x, self.params.corotated);
-                let f = b.field_gradient(i, x);
+            let (gradients, rotations) = corotation.rotations_at(store, bi, x, self.params.corotated);
+            for (i, (f, r)) in gradients.iter().zip(&rotations).enumerate() {
                 // Rᵀ F - I
                 let g: [[f64; 3]; 3] = std::array::from_fn(|p| {
                     std::array::from_fn(|q| r[p] * f[q] + r[3 + p] * f[3 + q] + r[6 + p] * f[6 + q] - f64::from(p == q))
@@ -233,55 +232,92 @@ pub(super) struct ShapeExtremes {
 /// Elements per parallel task.
 const TASK: usize = 1024;
 
+/// One element's shape at the current positions: its id, deformed volume
+/// (m³) and stretch.
+type Shape = (usize, f64, f64);
+
 impl ShapeExtremes {
-    /// One pass over the elements at the current node positions; the same
-    /// result on any number of threads (chunks are combined in order).
+    /// One pass over the elements at the current node positions: over the
+    /// element store's batches (contiguous nodes, rest positions and
+    /// surface triangles) for the nodal families, over the mesh for DG,
+    /// whose store holds coefficient blocks. The same result on any number
+    /// of threads (chunks are combined in order).
     pub(super) fn of(sim: &Simulation) -> Self {
-        let (mesh, x) = (sim.mesh(), sim.positions());
-        let chunks: Vec<(Vec<usize>, usize, Located)> = (0..mesh.elements.len())
-            .collect::<Vec<_>>()
-            .par_chunks(TASK)
-            .map(|chunk| {
-                let (mut inverted, mut count) = (Vec::new(), 0);
-                let mut worst = Located { value: 1.0, at: 0 };
-                let (mut rest, mut now) = (Vec::new(), Vec::new());
-                for &e in chunk {
-                    let el = &mesh.elements[e];
-                    let origin = x[el.nodes[0] as usize];
-                    let volume: f64 = mesh
-                        .element_triangles(e)
-                        .map(|t| {
-                            let p = |i: usize| x[t[i] as usize];
-                            cleave_kernels::tet::signed_volume(origin, p(0), p(1), p(2))
-                        })
-                        .sum();
-                    if !(volume > 0.0) {
-                        count += 1;
-                        if inverted.len() < super::guards::NAMED {
-                            inverted.push(e);
-                        }
-                    }
-                    rest.clear();
-                    now.clear();
-                    rest.extend(el.nodes.iter().map(|&v| mesh.nodes[v as usize]));
-                    now.extend(el.nodes.iter().map(|&v| x[v as usize]));
-                    let stretch = diameter(&now) / diameter(&rest);
-                    if !(stretch <= worst.value) {
-                        worst = Located { value: stretch, at: e };
-                    }
-                }
-                (inverted, count, worst)
-            })
-            .collect();
         let mut out = ShapeExtremes { inverted_count: 0, inverted: Vec::new(), stretch: Located { value: 1.0, at: 0 } };
-        for (inverted, count, worst) in chunks {
-            out.inverted_count += count;
-            out.inverted
-                .extend(inverted.into_iter().take(super::guards::NAMED - out.inverted.len().min(super::guards::NAMED)));
-            if !(worst.value <= out.stretch.value) {
-                out.stretch = worst;
-            }
+        let x = sim.positions();
+        if sim.dg().is_some() {
+            let mesh = sim.mesh();
+            out.scan(mesh.elements.len(), |e, now, rest| {
+                let el = &mesh.elements[e];
+                rest.extend(el.nodes.iter().map(|&v| mesh.nodes[v as usize]));
+                now.extend(el.nodes.iter().map(|&v| x[v as usize]));
+                let origin = now[0];
+                let volume = mesh
+                    .element_triangles(e)
+                    .map(|t| {
+                        cleave_kernels::tet::signed_volume(origin, x[t[0] as usize], x[t[1] as usize], x[t[2] as usize])
+                    })
+                    .sum();
+                (e, volume, diameter(now) / diameter(rest))
+            });
+            return out;
+        }
+        for b in &sim.store().batches {
+            let (k, per) = (b.k, b.triangles.len() / b.len().max(1));
+            out.scan(b.len(), |i, now, _| {
+                now.extend(b.nodes[i * k..(i + 1) * k].iter().map(|&v| x[v as usize]));
+                let rest = &b.rest[i * k..(i + 1) * k];
+                let volume = if b.is_tet() {
+                    let rest_sign = cleave_kernels::tet::signed_volume(rest[0], rest[1], rest[2], rest[3]).signum();
+                    rest_sign * cleave_kernels::tet::signed_volume(now[0], now[1], now[2], now[3])
+                } else {
+                    let triangles = &b.triangles[i * per..(i + 1) * per];
+                    let p = |v: u32| now[v as usize];
+                    triangles
+                        .iter()
+                        .map(|t| cleave_kernels::tet::signed_volume(now[0], p(t[0]), p(t[1]), p(t[2])))
+                        .sum()
+                };
+                (b.elements[i] as usize, volume, diameter(now) / diameter(rest))
+            });
         }
         out
+    }
+
+    /// Adds the shapes of `count` elements, `shape(i, now, rest)` measuring
+    /// the `i`-th with two cleared buffers to fill as it needs.
+    fn scan(&mut self, count: usize, shape: impl Fn(usize, &mut Vec<[f64; 3]>, &mut Vec<[f64; 3]>) -> Shape + Sync) {
+        let named = super::guards::NAMED;
+        let chunks: Vec<(Vec<usize>, usize, Located)> = (0..count.div_ceil(TASK))
+            .into_par_iter()
+            .map(|c| {
+                let (mut inverted, mut inverted_count) = (Vec::new(), 0);
+                let mut worst = Located { value: 1.0, at: 0 };
+                let (mut now, mut rest) = (Vec::new(), Vec::new());
+                for i in c * TASK..((c + 1) * TASK).min(count) {
+                    now.clear();
+                    rest.clear();
+                    let (id, volume, stretch) = shape(i, &mut now, &mut rest);
+                    if !(volume > 0.0) {
+                        inverted_count += 1;
+                        if inverted.len() < named {
+                            inverted.push(id);
+                        }
+                    }
+                    if !(stretch <= worst.value) {
+                        worst = Located { value: stretch, at: id };
+                    }
+                }
+                (inverted, inverted_count, worst)
+            })
+            .collect();
+        for (inverted, inverted_count, worst) in chunks {
+            self.inverted_count += inverted_count;
+            let room = named - self.inverted.len().min(named);
+            self.inverted.extend(inverted.into_iter().take(room));
+            if !(worst.value <= self.stretch.value) {
+                self.stretch = worst;
+            }
+        }
     }
 }
