@@ -384,18 +384,29 @@ impl DgElements {
     }
 
     /// The energy `½ uᵀ K u` of the face terms at block positions `x` (J),
-    /// from the forces of the last update (`u = X - X⁰`; a boundary face's
-    /// forces less its load).
-    pub fn face_energy(&self, x: &[[f64; 3]]) -> f64 {
+    /// with the elements' rotations extracted at `x` (warm-started from the
+    /// stored ones; identities if not `warp`): from the face forces there
+    /// (`u = X - X⁰`; a boundary face's forces less its load), computed
+    /// into fresh buffers, so the stored state is untouched.
+    pub fn face_energy(&self, x: &[[f64; 3]], warp: bool) -> f64 {
+        let mut rotations = vec![IDENTITY; self.rotations.len()];
+        for (bi, batch) in self.store.batches.iter().enumerate() {
+            let (_, at) = self.corotation.rotations_at(&self.store, bi, x, warp);
+            for (&e, r) in batch.elements.iter().zip(at) {
+                rotations[e as usize] = r;
+            }
+        }
+        let mut interior_forces = vec![[0.0; 3]; self.interior_forces.len()];
+        let mut boundary_forces = vec![[0.0; 3]; self.boundary_forces.len()];
+        self.face_forces_with(x, warp, &rotations, &mut interior_forces, &mut boundary_forces);
         let u = |blk: u32| -> [f64; 3] { std::array::from_fn(|k| x[blk as usize][k] - self.rest[blk as usize][k]) };
         let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let m = self.size();
-        let interior: f64 =
-            self.interior_blocks.iter().zip(&self.interior_forces).map(|(&blk, f)| dot(u(blk), *f)).sum();
+        let interior: f64 = self.interior_blocks.iter().zip(&interior_forces).map(|(&blk, f)| dot(u(blk), *f)).sum();
         let boundary: f64 = self
             .boundary_blocks
             .iter()
-            .zip(&self.boundary_forces)
+            .zip(&boundary_forces)
             .enumerate()
             .map(|(k, (&blk, f))| {
                 let load = self.boundary[k / m].load[k % m];
@@ -479,10 +490,27 @@ impl DgElements {
     /// Face forces at block positions `x` with the rotations of the last
     /// update (see [`faces`]).
     fn face_forces(&mut self, x: &[[f64; 3]], warp: bool) {
+        let (mut interior, mut boundary) =
+            (std::mem::take(&mut self.interior_forces), std::mem::take(&mut self.boundary_forces));
+        self.face_forces_with(x, warp, &self.rotations, &mut interior, &mut boundary);
+        (self.interior_forces, self.boundary_forces) = (interior, boundary);
+    }
+
+    /// The face forces at block positions `x` (N) with the elements'
+    /// rotations `rotations` (row-major, by element id) into
+    /// `interior_forces` and `boundary_forces`.
+    fn face_forces_with(
+        &self,
+        x: &[[f64; 3]],
+        warp: bool,
+        rotations: &[[f64; 9]],
+        interior_forces: &mut [[f64; 3]],
+        boundary_forces: &mut [[f64; 3]],
+    ) {
         let m = self.size();
         let r2 = 2 * m;
-        let mut interior_forces = std::mem::take(&mut self.interior_forces);
-        let this = &*self;
+        let this = self;
+        let rotation = |e: u32| if warp { &rotations[e as usize] } else { &IDENTITY };
         interior_forces.par_chunks_mut(r2).enumerate().for_each(|(i, out)| {
             let f = &this.interior[i];
             let blocks = &this.interior_blocks[i * r2..(i + 1) * r2];
@@ -493,7 +521,7 @@ impl DgElements {
                 let (xb, x0) = (x[blk as usize], this.rest[blk as usize]);
                 u[beta] = std::array::from_fn(|k| xb[k] - x0[k]);
                 for (side, zs) in z.iter_mut().enumerate() {
-                    let r = if warp { this.rotation(f.elements[side]) } else { &IDENTITY };
+                    let r = rotation(f.elements[side]);
                     let rx0 = rotate(r, x0);
                     zs[beta] = std::array::from_fn(|k| xb[k] - rx0[k]);
                 }
@@ -505,14 +533,14 @@ impl DgElements {
             for beta in 0..r2 {
                 let t = usize::from(beta >= m);
                 let chi_t = Self::sign(beta, m);
-                let rt = if warp { this.rotation(f.elements[t]) } else { &IDENTITY };
+                let rt = rotation(f.elements[t]);
                 for alpha in 0..r2 {
                     let s = usize::from(alpha >= m);
                     let chi_s = Self::sign(alpha, m);
                     let p = f.weight * chi_s * chi_t * f.mass[alpha * r2 + beta];
                     let mut fa = [p * u[beta][0], p * u[beta][1], p * u[beta][2]];
                     if consistent {
-                        let rs = if warp { this.rotation(f.elements[s]) } else { &IDENTITY };
+                        let rs = rotation(f.elements[s]);
                         let (b1, b2) = consistency_pair(f, r2, (alpha, beta), (chi_s, chi_t), (rs, rt), (lambda, mu));
                         let (v1, v2) = (mat_vec(&b1, z[t][beta]), mat_t_vec(&b2, z[s][beta]));
                         (0..3).for_each(|k| fa[k] += v1[k] + v2[k]);
@@ -521,9 +549,6 @@ impl DgElements {
                 }
             }
         });
-        self.interior_forces = interior_forces;
-        let mut boundary_forces = std::mem::take(&mut self.boundary_forces);
-        let this = &*self;
         boundary_forces.par_chunks_mut(m).enumerate().for_each(|(i, out)| {
             let f = &this.boundary[i];
             let mut column = [[0.0; 9]; MAX_BASIS];
@@ -540,7 +565,6 @@ impl DgElements {
                 }
             }
         });
-        self.boundary_forces = boundary_forces;
     }
 }
 

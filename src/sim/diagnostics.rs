@@ -57,11 +57,7 @@ impl Simulation {
         let volume = self.elements.corotation().energy(self.elements.store(), x, warp);
         match &self.elements {
             Model::Nodal(_) => volume,
-            Model::Dg(d) => {
-                let mut d = d.clone();
-                d.update(x, warp);
-                volume + d.face_energy(x)
-            }
+            Model::Dg(d) => volume + d.face_energy(x, warp),
         }
     }
 
