@@ -41,6 +41,9 @@ pub enum Group {
     /// Small bodies: one step of bodies of 1 to 300 elements, and 256
     /// bodies stepped together.
     Bodies,
+    /// The work `benches/peers` gives the peers, on bunny_100k: `K_e`,
+    /// pattern, assembly, the Cholesky phases of `K + 10³ I`, and steps.
+    Peers,
 }
 
 /// One measured stage.
@@ -225,6 +228,9 @@ pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Erro
     if run(Group::Bodies) {
         out.extend(body_measurements(quick)?);
     }
+    if only == Some(Group::Peers) {
+        out.extend(peer_measurements(quick)?);
+    }
     Ok(Report { threads: rayon::current_num_threads(), measurements: out })
 }
 
@@ -233,7 +239,26 @@ pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Erro
 fn pipeline_measurements(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
     let cells = if quick { [16, 4, 4] } else { [64, 16, 16] };
     let mesh = box_tet([0.0; 3], [4.0, 1.0, 1.0], cells)?;
-    let label = format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]);
+    pipeline_on(&mesh, &format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]), material)
+}
+
+/// What the peer comparison (`benches/peers/run.sh`) measures of cleave,
+/// on the same mesh and matrix as the peers: bunny_100k with E = 10⁷ Pa,
+/// ν = 0.35, the pipeline of [`pipeline_on`] (Cholesky of `K + 10³ I`),
+/// and corotated steps with conjugate gradients and with Cholesky.
+fn peer_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
+    let (name, steps) = if quick { ("bunny_5k", 2) } else { ("bunny_100k", 10) };
+    let mesh = cleave::io::read_mesh(&asset(&format!("{name}.mesh")))?;
+    let mut out = pipeline_on(&mesh, name, &Material::new(1e7, 0.35, 1000.0)?)?;
+    out.extend(step_measurements(name, mesh.clone(), SolverKind::Cg, steps)?);
+    out.extend(step_measurements(name, mesh, SolverKind::Cholesky, 2)?);
+    Ok(out)
+}
+
+/// Tetrahedral `K_e` build, sparse pattern, assembly and the three Cholesky
+/// phases (of `K + 10³ I`) on `mesh` (named `label` in the rows).
+fn pipeline_on(mesh: &PolyMesh, label: &str, material: &Material) -> Result<Vec<Measurement>, Error> {
+    let label = label.to_string();
     let (ne, nn) = (mesh.elements.len(), mesh.nodes.len());
     let mut out = Vec::new();
     let mut push = |name: &str, ms: f64, extra: Option<(String, f64)>| {
@@ -247,7 +272,7 @@ fn pipeline_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
             extra,
         })
     };
-    let (ms, store) = best_ms(5, || ElementStore::build(&mesh, material, &BasisOptions::default()));
+    let (ms, store) = best_ms(5, || ElementStore::build(mesh, material, &BasisOptions::default()));
     let store = store?;
     push("tet K_e build", ms, None);
     let (ms, pattern) = best_ms(3, || SparsePattern::build(mesh.nodes.len(), &store));
