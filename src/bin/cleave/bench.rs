@@ -284,6 +284,7 @@ fn pipeline_on(mesh: &PolyMesh, label: &str, material: &Material) -> Result<Vec<
     let mut chol = Cholesky::default();
     let (ms, r) = best_ms(1, || chol.analyze(pattern.symbolic.as_ref()));
     r?;
+    // nnz(L) as CHOLMOD counts it (on and below the diagonal)
     push("cholesky symbolic", ms, Some(("nnz(L)".into(), chol.factor_nnz() as f64)));
     // a regular matrix: K plus a mass-like diagonal
     for d in 0..3 * nn {
