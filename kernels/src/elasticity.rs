@@ -196,7 +196,7 @@ pub fn element_stiffness(
             transposed[q * n + r] = grad[r * nq + q];
         }
     }
-    pulp::Arch::new().dispatch(Gram { weights, grad, transposed, n, gram });
+    crate::lanes::dispatch(Gram { weights, grad, transposed, n, gram });
     stiffness_from_gram(gram, k, lambda, mu, ke);
 }
 

@@ -126,7 +126,7 @@ impl pulp::WithSimd for Factor<'_> {
 /// pivot is not positive (or not finite).
 pub fn factor(envelope: &Envelope<'_>, factor: &mut [f64], inverse_diagonal: &mut [f64]) -> Result<(), NotPositive> {
     envelope.check(factor, inverse_diagonal);
-    pulp::Arch::new().dispatch(Factor { envelope, factor, inverse_diagonal })
+    crate::lanes::dispatch(Factor { envelope, factor, inverse_diagonal })
 }
 
 struct Solve<'a> {
@@ -162,7 +162,7 @@ impl pulp::WithSimd for Solve<'_> {
 pub fn solve(envelope: &Envelope<'_>, factor: &[f64], inverse_diagonal: &[f64], x: &mut [f64]) {
     envelope.check(factor, inverse_diagonal);
     assert_eq!(x.len(), inverse_diagonal.len(), "one value per row");
-    pulp::Arch::new().dispatch(Solve { envelope, factor, inverse_diagonal, x });
+    crate::lanes::dispatch(Solve { envelope, factor, inverse_diagonal, x });
 }
 
 /// `Σ a_k b_k` in a fixed order: [`LANES`] interleaved partial sums, then

@@ -148,7 +148,7 @@ impl pulp::WithSimd for Evaluate<'_> {
 /// [`evaluate_scalar`]; `stack` holds at least [`evaluate_scratch`].
 pub fn evaluate(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64], stack: &mut MemStack) {
     f.check_layout(points.len(), phi, grad);
-    pulp::Arch::new().dispatch(Evaluate { f, points, phi, grad, stack });
+    crate::lanes::dispatch(Evaluate { f, points, phi, grad, stack });
 }
 
 #[cfg(test)]

@@ -243,61 +243,99 @@ impl<S: Simd> Real for Lanes<S> {
     }
 }
 
+/// An instruction set the SIMD kernels run on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimdLevel {
+    /// Plain `f64`, one lane (pulp's scalar backend).
+    Scalar,
+    /// x86-64-v3: AVX2 (4 lanes).
+    Avx2,
+    /// x86-64-v4: AVX-512 (8 lanes).
+    Avx512,
+}
+
+impl SimdLevel {
+    /// The levels this machine runs, lowest first.
+    pub fn available() -> Vec<SimdLevel> {
+        let mut out = vec![SimdLevel::Scalar];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if pulp::x86::V3::try_new().is_some() {
+                out.push(SimdLevel::Avx2);
+            }
+            if pulp::x86::V4::try_new().is_some() {
+                out.push(SimdLevel::Avx512);
+            }
+        }
+        out
+    }
+
+    /// Runs `op` at this level; panics where the machine lacks it (see
+    /// [`SimdLevel::available`]).
+    pub fn run<Op: pulp::WithSimd>(self, op: Op) -> Op::Output {
+        match self {
+            // `Simd::vectorize` compiles the kernel inside the level's
+            // target features (a closure handed to the inherent `vectorize`
+            // is not inlined there: the lanes then cost a call each)
+            SimdLevel::Scalar => pulp::Simd::vectorize(pulp::Scalar::new(), op),
+            #[cfg(target_arch = "x86_64")]
+            SimdLevel::Avx2 => pulp::Simd::vectorize(pulp::x86::V3::try_new().expect("AVX2 is available"), op),
+            #[cfg(target_arch = "x86_64")]
+            SimdLevel::Avx512 => pulp::Simd::vectorize(pulp::x86::V4::try_new().expect("AVX-512 is available"), op),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => unreachable!("only scalar runs off x86-64"),
+        }
+    }
+}
+
+/// The level every kernel runs at: 0 for the best the machine offers, else
+/// `1 + SimdLevel as u8`, resolved to one the machine has when set.
+static CAP: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+
+/// Caps the instruction set of every kernel dispatched from now on, for the
+/// whole process (`None`: the best the machine offers, the default); a
+/// level the machine lacks caps at the best below it. Results are the same
+/// bits at every level (see the module docs); only speed differs, which is
+/// what `cleave bench --only simd` measures.
+pub fn cap_simd_level(level: Option<SimdLevel>) {
+    let resolved = level.map_or(0, |cap| {
+        let best = SimdLevel::available().into_iter().rev().find(|&l| l as u8 <= cap as u8);
+        1 + best.unwrap_or(SimdLevel::Scalar) as u8
+    });
+    CAP.store(resolved, core::sync::atomic::Ordering::Relaxed);
+}
+
+/// Runs `op` at the best level the machine offers within the cap.
+#[inline]
+pub fn dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
+    match CAP.load(core::sync::atomic::Ordering::Relaxed) {
+        0 => pulp::Arch::new().dispatch(op),
+        1 => SimdLevel::Scalar.run(op),
+        2 => SimdLevel::Avx2.run(op),
+        _ => SimdLevel::Avx512.run(op),
+    }
+}
+
 /// Running a kernel on every instruction set this machine offers, for the
 /// tests that hold each kernel's SIMD path bitwise equal to its scalar
 /// reference.
 #[cfg(test)]
 pub(crate) mod levels {
-    /// An instruction set a kernel can run on.
-    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-    pub(crate) enum Level {
-        /// Plain `f64`, one lane.
-        Scalar,
-        /// x86-64-v3: AVX2 (4 lanes).
-        V3,
-        /// x86-64-v4: AVX-512 (8 lanes).
-        V4,
-    }
+    use super::SimdLevel;
 
     /// The levels this machine runs; prints them, so that a test's output
     /// says which ran (a missing one is named, not silently skipped).
-    pub(crate) fn available(test: &str) -> Vec<Level> {
-        let mut out = vec![Level::Scalar];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if pulp::x86::V3::try_new().is_some() {
-                out.push(Level::V3);
-            }
-            if pulp::x86::V4::try_new().is_some() {
-                out.push(Level::V4);
-            }
-        }
-        let missing: Vec<&str> = [(Level::V3, "V3 (AVX2)"), (Level::V4, "V4 (AVX-512)")]
-            .iter()
-            .filter(|(l, _)| !out.contains(l))
-            .map(|(_, n)| *n)
-            .collect();
+    pub(crate) fn available(test: &str) -> Vec<SimdLevel> {
+        let out = SimdLevel::available();
+        let missing: Vec<SimdLevel> =
+            [SimdLevel::Avx2, SimdLevel::Avx512].into_iter().filter(|l| !out.contains(l)).collect();
         println!("{test}: ran on {out:?}; not on this machine: {missing:?}");
         out
     }
 
     /// Runs `op` with the instruction set `level`.
-    pub(crate) fn run<Op: pulp::WithSimd>(level: Level, op: Op) -> Op::Output {
-        match level {
-            Level::Scalar => op.with_simd(pulp::Scalar::new()),
-            #[cfg(target_arch = "x86_64")]
-            Level::V3 => {
-                let simd = pulp::x86::V3::try_new().expect("V3 is available");
-                simd.vectorize(|| op.with_simd(simd))
-            }
-            #[cfg(target_arch = "x86_64")]
-            Level::V4 => {
-                let simd = pulp::x86::V4::try_new().expect("V4 is available");
-                simd.vectorize(|| op.with_simd(simd))
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            _ => unreachable!("only scalar runs off x86-64"),
-        }
+    pub(crate) fn run<Op: pulp::WithSimd>(level: SimdLevel, op: Op) -> Op::Output {
+        level.run(op)
     }
 }
 
@@ -327,7 +365,7 @@ mod tests {
 
     #[test]
     fn atan2_polynomial_matches_std() {
-        let worst = pulp::Arch::new().dispatch(AtanCheck);
+        let worst = crate::lanes::dispatch(AtanCheck);
         assert!(worst < 4e-16, "relative error {worst:e}");
         let worst = pulp::WithSimd::with_simd(AtanCheck, pulp::Scalar::new());
         assert!(worst < 4e-16, "relative error {worst:e}");

@@ -206,7 +206,7 @@ pub fn evaluate(
     stack: &mut MemStack,
 ) {
     check_layout(vertices.len(), triangles, points.len(), phi, grad);
-    pulp::Arch::new().dispatch(Evaluate { vertices, triangles, points, phi, grad, stack });
+    crate::lanes::dispatch(Evaluate { vertices, triangles, points, phi, grad, stack });
 }
 
 #[cfg(test)]

@@ -179,7 +179,7 @@ impl pulp::WithSimd for Faces<'_> {
 /// equal to [`face_moments_scalar`].
 pub fn face_moments(n: usize, d: usize, vertices: &[[f64; 3]], moments: &mut [f64], planes: &mut [[f64; 4]]) {
     check(n, d, vertices, moments, planes);
-    pulp::Arch::new().dispatch(Faces { n, d, vertices, moments, planes });
+    crate::lanes::dispatch(Faces { n, d, vertices, moments, planes });
 }
 
 /// Adds face `F`'s share `b_F / (3 + |α|) ∫_F m_α dA` of every volume

@@ -185,7 +185,7 @@ impl pulp::WithSimd for Polar<'_> {
 /// largest iteration count of a lane group.
 pub fn polar_rotations(f: &[[f64; 9]], q: &mut [[f64; 4]]) -> usize {
     assert_eq!(f.len(), q.len());
-    pulp::Arch::new().dispatch(Polar { f, q })
+    crate::lanes::dispatch(Polar { f, q })
 }
 
 #[cfg(test)]
@@ -229,9 +229,17 @@ mod tests {
             crate::lanes::levels::run(level, Polar { f: &f, q: &mut qv });
             assert_eq!(qs, qv, "{level:?}: SIMD and scalar agree bitwise");
         }
-        let mut qv = vec![[1.0, 0.0, 0.0, 0.0]; f.len()];
-        polar_rotations(&f, &mut qv);
-        assert_eq!(qs, qv, "the dispatched path");
+        // the dispatched path, uncapped and capped at every level (the cap is
+        // process-wide: another test dispatching meanwhile runs at this
+        // level, which changes only its speed)
+        use crate::lanes::{cap_simd_level, SimdLevel};
+        for cap in [None, Some(SimdLevel::Scalar), Some(SimdLevel::Avx2), Some(SimdLevel::Avx512)] {
+            cap_simd_level(cap);
+            let mut qv = vec![[1.0, 0.0, 0.0, 0.0]; f.len()];
+            polar_rotations(&f, &mut qv);
+            assert_eq!(qs, qv, "the dispatched path capped at {cap:?}");
+        }
+        cap_simd_level(None);
         for ((want, _), got) in cases.iter().zip(&qs) {
             let (a, b) = (rotation_matrix(*want), rotation_matrix(*got));
             for i in 0..9 {

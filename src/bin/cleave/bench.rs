@@ -41,6 +41,9 @@ pub enum Group {
     /// Small bodies: one step of bodies of 1 to 300 elements, and 256
     /// bodies stepped together.
     Bodies,
+    /// Every SIMD kernel against its scalar reference, at AVX2 and at
+    /// AVX-512 (where the machine has them).
+    Simd,
     /// The work `benches/peers` gives the peers, on bunny_100k: `K_e`,
     /// pattern, assembly, the Cholesky phases of `K + 10³ I`, and steps.
     Peers,
@@ -93,7 +96,7 @@ impl Report {
 }
 
 /// Best of `reps` runs of `f`, in ms.
-fn best_ms<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+pub(crate) fn best_ms<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     let mut best = f64::INFINITY;
     let mut out = None;
     for _ in 0..reps {
@@ -106,18 +109,20 @@ fn best_ms<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 }
 
 /// A basis evaluation kernel to time.
-enum EvalKernel<'a> {
+pub(crate) enum EvalKernel<'a> {
     /// Mean value coordinates, SIMD.
     MeanValue,
     /// Mean value coordinates, the scalar reference.
     MeanValueScalar,
     /// Fitted harmonic functions, SIMD.
     Harmonic(&'a cleave::store::harmonic::ElementBasis),
+    /// Fitted harmonic functions, the scalar reference.
+    HarmonicScalar(&'a cleave::store::harmonic::ElementBasis),
 }
 
 /// Wall time (ms) of evaluating `kernel` at the paper's points of `mesh`'s
 /// single element `reps` times, and the number of points evaluated.
-fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) -> (f64, usize) {
+pub(crate) fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) -> (f64, usize) {
     use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
     use cleave_kernels::{harmonic, mean_value, quadrature};
     let nodes = &mesh.elements[0].nodes;
@@ -140,6 +145,9 @@ fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) -> (f64, usiz
                     mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad, stack)
                 }
                 EvalKernel::Harmonic(b) => harmonic::evaluate(&b.functions(), &p, &mut phi, &mut grad, stack),
+                EvalKernel::HarmonicScalar(b) => {
+                    harmonic::evaluate_scalar(&b.functions(), &p, &mut phi, &mut grad, stack)
+                }
             }
         }
     });
@@ -227,6 +235,9 @@ pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Erro
     }
     if run(Group::Bodies) {
         out.extend(body_measurements(quick)?);
+    }
+    if run(Group::Simd) {
+        out.extend(crate::simd::simd_measurements(quick)?);
     }
     if only == Some(Group::Peers) {
         out.extend(peer_measurements(quick)?);

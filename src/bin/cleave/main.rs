@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod simd;
 
 use cleave::mesh::ValidationOptions;
 use cleave::scene::{resume_run, run_scene, LoadedScene, RunOptions};

@@ -1,0 +1,161 @@
+//! `cleave bench --only simd`: every SIMD kernel against its scalar
+//! reference, at each instruction set this machine offers (AVX2 and
+//! AVX-512 forced in turn through [`cap_simd_level`]), in one run.
+//!
+//! The reference is the kernel's plain-`f64` function (`*_scalar`), except
+//! for the envelope Cholesky, which has none: its reference is the same
+//! code on pulp's one-lane scalar backend. Rows report the time of a fixed
+//! amount of work and the speed-up over the reference; every kernel gives
+//! the same bits at every level (their tests check it), so only speed
+//! differs.
+
+use cleave::Error;
+use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
+use cleave_kernels::{elasticity, moments, polynomial, rotation};
+
+use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
+
+/// One kernel's work, run at the reference (`true`) or dispatched.
+struct Kernel<'a> {
+    name: &'static str,
+    size: String,
+    run: Box<dyn FnMut(bool) -> f64 + 'a>,
+}
+
+/// A deterministic value in `[-1, 1)` from `i`.
+fn noise(i: usize) -> f64 {
+    let x = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
+    2.0 * (x as f64 / (1u64 << 53) as f64) - 1.0
+}
+
+/// The rows: per kernel, the reference and each level with its speed-up.
+pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
+    let scale = if quick { 1 } else { 10 };
+    let levels: Vec<SimdLevel> = SimdLevel::available().into_iter().filter(|&l| l != SimdLevel::Scalar).collect();
+    let mut kernels: Vec<Kernel> = Vec::new();
+
+    // shape functions at the paper's points of one 16-vertex element
+    let mv =
+        cleave::meshing::element_with_vertices(16).ok_or_else(|| Error::Internal("no 16-vertex element".into()))?;
+    let reps = 200 * scale;
+    kernels.push(Kernel {
+        name: "mean value evaluate",
+        size: format!("{reps} x 16-vertex element"),
+        run: Box::new(move |reference| {
+            let kernel = if reference { EvalKernel::MeanValueScalar } else { EvalKernel::MeanValue };
+            basis_eval_ms(&mv, reps, kernel).0
+        }),
+    });
+    let hm =
+        cleave::meshing::element_with_vertices(12).ok_or_else(|| Error::Internal("no 12-vertex element".into()))?;
+    let options = cleave::store::HarmonicOptions { trilinear_hexahedra: false, ..Default::default() };
+    let faces = cleave::store::harmonic::face_bases(&hm, &[0], &options)?;
+    let basis = cleave::store::harmonic::element_basis(&hm, 0, &faces, &options)
+        .ok_or(cleave::store::BasisError::HarmonicFit { element: 0 })?;
+    kernels.push(Kernel {
+        name: "harmonic evaluate",
+        size: format!("{} x 12-vertex element", 20 * scale),
+        run: Box::new(move |reference| {
+            let kernel = if reference { EvalKernel::HarmonicScalar(&basis) } else { EvalKernel::Harmonic(&basis) };
+            basis_eval_ms(&hm, 20 * scale, kernel).0
+        }),
+    });
+
+    // the Gram matrix of a 16-node element's gradient table at 64 points
+    let (k, nq) = (16, 64);
+    let grad: Vec<f64> = (0..3 * k * nq).map(noise).collect();
+    let weights: Vec<f64> = (0..nq).map(|q| 1.0 + 0.5 * noise(7 * q + 3)).collect();
+    let mut scratch = vec![0.0; elasticity::stiffness_scratch_len(k, nq)];
+    let mut ke = vec![0.0; 9 * k * k];
+    let reps = 200 * scale;
+    kernels.push(Kernel {
+        name: "element stiffness",
+        size: format!("{reps} x k = 16, 64 points"),
+        run: Box::new(move |reference| {
+            let (ms, ()) = best_ms(3, || {
+                for _ in 0..reps {
+                    if reference {
+                        elasticity::element_stiffness_scalar(&grad, &weights, k, 1.0, 0.5, &mut scratch, &mut ke);
+                    } else {
+                        elasticity::element_stiffness(&grad, &weights, k, 1.0, 0.5, &mut scratch, &mut ke);
+                    }
+                }
+            });
+            ms
+        }),
+    });
+
+    // polar decompositions of stretched, turned deformation gradients
+    let n = 4096 * scale;
+    let f: Vec<[f64; 9]> =
+        (0..n).map(|i| std::array::from_fn(|c| f64::from(u8::from(c % 4 == 0)) + 0.3 * noise(9 * i + c))).collect();
+    let mut q = vec![[1.0, 0.0, 0.0, 0.0]; n];
+    kernels.push(Kernel {
+        name: "polar rotations",
+        size: format!("{n} gradients, cold start"),
+        run: Box::new(move |reference| {
+            let (ms, _) = best_ms(3, || {
+                q.iter_mut().for_each(|q| *q = [1.0, 0.0, 0.0, 0.0]);
+                if reference {
+                    rotation::polar_rotations_scalar(&f, &mut q)
+                } else {
+                    rotation::polar_rotations(&f, &mut q)
+                }
+            });
+            ms
+        }),
+    });
+
+    // moments up to degree 2 of planar hexagons in random planes
+    let (faces, per) = (2048 * scale, 6);
+    let vertices: Vec<[f64; 3]> = (0..faces)
+        .flat_map(|f| {
+            let (a, b) = ([1.0, noise(3 * f), 0.2], [noise(3 * f + 1), 1.0, noise(3 * f + 2)]);
+            (0..per).map(move |j| {
+                let t = std::f64::consts::TAU * j as f64 / per as f64;
+                let (c, s) = (t.cos(), t.sin());
+                std::array::from_fn(|i| c * a[i] + s * b[i])
+            })
+        })
+        .collect();
+    let degree = 2;
+    let mut moment_values = vec![0.0; polynomial::count(degree) * faces];
+    let mut planes = vec![[0.0; 4]; faces];
+    kernels.push(Kernel {
+        name: "face moments",
+        size: format!("{faces} hexagons, degree {degree}"),
+        run: Box::new(move |reference| {
+            let (ms, ()) = best_ms(3, || {
+                if reference {
+                    moments::face_moments_scalar(per, degree, &vertices, &mut moment_values, &mut planes);
+                } else {
+                    moments::face_moments(per, degree, &vertices, &mut moment_values, &mut planes);
+                }
+            });
+            ms
+        }),
+    });
+
+    let mut out = Vec::new();
+    for mut kernel in kernels {
+        cap_simd_level(None);
+        let reference = (kernel.run)(true);
+        let row = |name: String, ms: f64, speedup: f64| Measurement {
+            name,
+            mesh: kernel.size.clone(),
+            elements: 0,
+            nodes: 0,
+            ms,
+            elements_per_s: 0.0,
+            extra: Some(("speed-up over scalar".into(), speedup)),
+        };
+        out.push(row(format!("{} scalar reference", kernel.name), reference, 1.0));
+        for &level in &levels {
+            cap_simd_level(Some(level));
+            let ms = (kernel.run)(false);
+            out.push(row(format!("{} {level:?}", kernel.name), ms, reference / ms));
+        }
+    }
+    cap_simd_level(None);
+    Ok(out)
+}
