@@ -102,6 +102,11 @@ fn bunny_cut_two_hundred_times_stays_healthy() {
         if step == steps / 4 {
             rss_early = status_kb("VmRSS:");
         }
+        if step % 500 == 0 {
+            let (elements, rss) = (sim.mesh().elements.len(), status_kb("VmRSS:"));
+            let rate = step as f64 / started.elapsed().as_secs_f64();
+            println!("step {step}: {made} cuts, {elements} elements, {rate:.0} steps/s, resident {rss} kB");
+        }
     }
     let seconds = started.elapsed().as_secs_f64();
     let (rss_end, peak) = (status_kb("VmRSS:"), status_kb("VmHWM:"));
