@@ -159,3 +159,28 @@ fn guard_bounds_are_checked_with_their_line() {
     let e = LoadedScene::parse(Path::new("g.toml"), text("sometimes", "")).unwrap_err();
     assert!(e.to_string().contains("sometimes"), "{e}");
 }
+
+/// A body of every element kind at rest trips nothing: tetrahedra (closed
+/// form), mean value hexahedra and harmonic (trilinear) hexahedra, whose
+/// store keeps no surface triangles, and DG.
+#[test]
+fn bodies_of_every_kind_at_rest_trip_nothing() {
+    use cleave::sim::{GuardLimits, Guards, Simulation, SimulationParams};
+    use cleave::store::Family;
+    let material = cleave::material::Material::new(1e5, 0.3, 1000.0).unwrap();
+    let tets = cleave::meshing::box_tet([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+    let hexes = cleave::meshing::box_hex([0.0; 3], [1.0; 3], [2, 2, 2]).unwrap();
+    for (mesh, family) in [
+        (tets.clone(), Family::MeanValue),
+        (hexes.clone(), Family::MeanValue),
+        (hexes, Family::Harmonic),
+        (tets, Family::Dg),
+    ] {
+        let mut params = SimulationParams { material, gravity: [0.0; 3], ..Default::default() };
+        params.basis.family = family;
+        let mut sim = Simulation::new(mesh, params).unwrap();
+        sim.step().unwrap();
+        let trip = Guards::new(GuardLimits::default()).check(&sim, 1);
+        assert!(trip.is_none(), "{family:?}: {}", trip.unwrap());
+    }
+}

@@ -234,8 +234,9 @@ type Shape = (usize, f64, f64);
 
 impl ShapeExtremes {
     /// One pass over the elements at the current node positions: over the
-    /// element store's batches (contiguous nodes, rest positions and
-    /// surface triangles) for the nodal families, over the mesh for DG,
+    /// element store's batches (contiguous nodes and rest positions, a
+    /// closed-form volume for tetrahedra) for the nodal families, over the
+    /// mesh for DG,
     /// whose store holds coefficient blocks. The same result on any number
     /// of threads (chunks are combined in order).
     pub(super) fn of(sim: &Simulation) -> Self {
@@ -258,23 +259,31 @@ impl ShapeExtremes {
             });
             return out;
         }
+        let mesh = sim.mesh();
         for b in &sim.store().batches {
-            let (k, per) = (b.k, b.triangles.len() / b.len().max(1));
+            let k = b.k;
             out.scan(b.len(), |i, now, _| {
                 now.extend(b.nodes[i * k..(i + 1) * k].iter().map(|&v| x[v as usize]));
-                let rest = &b.rest[i * k..(i + 1) * k];
+                let (rest, e) = (&b.rest[i * k..(i + 1) * k], b.elements[i] as usize);
                 let volume = if b.is_tet() {
                     let rest_sign = cleave_kernels::tet::signed_volume(rest[0], rest[1], rest[2], rest[3]).signum();
                     rest_sign * cleave_kernels::tet::signed_volume(now[0], now[1], now[2], now[3])
                 } else {
-                    let triangles = &b.triangles[i * per..(i + 1) * per];
-                    let p = |v: u32| now[v as usize];
-                    triangles
-                        .iter()
-                        .map(|t| cleave_kernels::tet::signed_volume(now[0], p(t[0]), p(t[1]), p(t[2])))
+                    // over the mesh's face triangles: every kind of element
+                    // has them (the store keeps its own only for some)
+                    let origin = now[0];
+                    mesh.element_triangles(e)
+                        .map(|t| {
+                            cleave_kernels::tet::signed_volume(
+                                origin,
+                                x[t[0] as usize],
+                                x[t[1] as usize],
+                                x[t[2] as usize],
+                            )
+                        })
                         .sum()
                 };
-                (b.elements[i] as usize, volume, diameter(now) / diameter(rest))
+                (e, volume, diameter(now) / diameter(rest))
             });
         }
         out
