@@ -12,16 +12,13 @@ use cleave::material::Material;
 use cleave::mesh::Plane;
 use cleave::sim::{Collider, GuardLimits, Guards, Simulation, SimulationParams};
 use cleave::store::HealthFloors;
+use cleave_kernels::vec3::{cross, norm, scale};
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
+/// `a` scaled to unit length.
 fn unit_vector(a: [f64; 3]) -> [f64; 3] {
-    let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    a.map(|x| x / n)
+    scale(a, 1.0 / norm(a))
 }
 
 /// A field of `/proc/self/status` (kB), 0 where there is none.

@@ -249,15 +249,18 @@ impl PolyMesh {
     /// Signed volume of element `e` in m^3 (positive when its faces point
     /// outward), by the divergence theorem over its face triangles.
     pub fn element_volume(&self, e: usize) -> f64 {
-        let origin = self.nodes[self.elements[e].nodes[0] as usize];
+        self.element_volume_at(e, &self.nodes)
+    }
+
+    /// Signed volume of element `e` (m^3) with its nodes at `positions`
+    /// (indexed by node id), over its face triangles: not positive once
+    /// the element is inverted.
+    pub fn element_volume_at(&self, e: usize, positions: &[[f64; 3]]) -> f64 {
+        let origin = positions[self.elements[e].nodes[0] as usize];
         self.element_triangles(e)
             .map(|t| {
-                cleave_kernels::tet::signed_volume(
-                    origin,
-                    self.nodes[t[0] as usize],
-                    self.nodes[t[1] as usize],
-                    self.nodes[t[2] as usize],
-                )
+                let p = |i: usize| positions[t[i] as usize];
+                cleave_kernels::tet::signed_volume(origin, p(0), p(1), p(2))
             })
             .sum()
     }

@@ -73,23 +73,9 @@ impl BatchState {
     /// from the stored ones (SIMD over elements, as in a step) without
     /// storing them; identities if not `warp`.
     fn rotations_at(&self, b: &Batch, x: &[[f64; 3]], warp: bool) -> (Vec<[f64; 9]>, Vec<[f64; 9]>) {
-        let k = b.k;
-        let mut gradients = vec![IDENTITY; b.len()];
-        gradients
-            .par_chunks_mut(TASK)
-            .zip(b.nodes.par_chunks(TASK * k))
-            .zip(b.stress_grads.par_chunks(TASK * k))
-            .for_each(|((f, nodes), grads)| deformation_gradients(k, nodes, x, grads, f));
-        let mut rotations = vec![IDENTITY; b.len()];
-        if warp {
-            let mut q = self.quaternion.clone();
-            rotations.par_chunks_mut(TASK).zip(q.par_chunks_mut(TASK)).zip(gradients.par_chunks(TASK)).for_each(
-                |((r, q), f)| {
-                    polar_rotations(f, q);
-                    r.iter_mut().zip(q.iter()).for_each(|(r, q)| *r = rotation_matrix(*q));
-                },
-            );
-        }
+        let (mut gradients, mut rotations, mut q) =
+            (vec![IDENTITY; b.len()], vec![IDENTITY; b.len()], self.quaternion.clone());
+        gradients_and_rotations(b, x, warp, 0..b.len(), &mut gradients, &mut q, &mut rotations);
         (gradients, rotations)
     }
 
@@ -98,26 +84,16 @@ impl BatchState {
     /// positions `x` (m); returns the largest number of rotation iterations.
     fn update_range(&mut self, b: &Batch, x: &[[f64; 3]], warp: bool, range: std::ops::Range<usize>) -> usize {
         let (k, first, end) = (b.k, range.start, range.end);
-        // 1. deformation gradients
-        self.gradient[range.clone()]
-            .par_chunks_mut(TASK)
-            .zip(b.nodes[first * k..end * k].par_chunks(TASK * k))
-            .zip(b.stress_grads[first * k..end * k].par_chunks(TASK * k))
-            .for_each(|((f, nodes), grads)| deformation_gradients(k, nodes, x, grads, f));
-        // 2. rotations, SIMD over elements (the polar decomposition), warm-started
-        let mut most = 0;
-        if warp {
-            most = self.quaternion[range.clone()]
-                .par_chunks_mut(TASK)
-                .zip(self.gradient[range.clone()].par_chunks(TASK))
-                .map(|(q, f)| polar_rotations(f, q))
-                .max()
-                .unwrap_or(0);
-            self.rotation[range.clone()]
-                .par_chunks_mut(TASK)
-                .zip(self.quaternion[range.clone()].par_chunks(TASK))
-                .for_each(|(r, q)| r.iter_mut().zip(q).for_each(|(r, q)| *r = rotation_matrix(*q)));
-        }
+        // 1. and 2. deformation gradients and rotations
+        let most = gradients_and_rotations(
+            b,
+            x,
+            warp,
+            range.clone(),
+            &mut self.gradient[range.clone()],
+            &mut self.quaternion[range.clone()],
+            &mut self.rotation[range.clone()],
+        );
         // 3. forces (and rotated gradients of tetrahedra)
         let (rotation, gradient) = (&self.rotation[range.clone()], &self.gradient[range.clone()]);
         let forces = &mut self.force[first * k..end * k];
@@ -142,6 +118,38 @@ impl BatchState {
         }
         most
     }
+}
+
+/// The deformation gradients of the entries `range` of batch `b` at
+/// positions `x` (m) into `gradient`, and, if `warp`, their rotations
+/// (SIMD over elements, the polar decomposition warm-started from
+/// `quaternion`, which it updates) into `rotation` (row-major); the three
+/// slices hold the range's entries. Returns the largest number of rotation
+/// iterations.
+fn gradients_and_rotations(
+    b: &Batch,
+    x: &[[f64; 3]],
+    warp: bool,
+    range: std::ops::Range<usize>,
+    gradient: &mut [[f64; 9]],
+    quaternion: &mut [[f64; 4]],
+    rotation: &mut [[f64; 9]],
+) -> usize {
+    let (k, first, end) = (b.k, range.start, range.end);
+    gradient
+        .par_chunks_mut(TASK)
+        .zip(b.nodes[first * k..end * k].par_chunks(TASK * k))
+        .zip(b.stress_grads[first * k..end * k].par_chunks(TASK * k))
+        .for_each(|((f, nodes), grads)| deformation_gradients(k, nodes, x, grads, f));
+    if !warp {
+        return 0;
+    }
+    let most = quaternion.par_chunks_mut(TASK).zip(gradient.par_chunks(TASK)).map(|(q, f)| polar_rotations(f, q)).max();
+    rotation
+        .par_chunks_mut(TASK)
+        .zip(quaternion.par_chunks(TASK))
+        .for_each(|(r, q)| r.iter_mut().zip(q).for_each(|(r, q)| *r = rotation_matrix(*q)));
+    most.unwrap_or(0)
 }
 
 /// Rotations, forces and warped blocks of every element.

@@ -241,25 +241,17 @@ impl ShapeExtremes {
     /// of threads (chunks are combined in order).
     pub(super) fn of(sim: &Simulation) -> Self {
         let mut out = ShapeExtremes { inverted_count: 0, inverted: Vec::new(), stretch: Located { value: 1.0, at: 0 } };
-        let x = sim.positions();
+        let (x, mesh) = (sim.positions(), sim.mesh());
         if sim.dg().is_some() {
-            let mesh = sim.mesh();
             out.scan(mesh.elements.len(), |e, now, rest| {
                 let el = &mesh.elements[e];
                 rest.extend(el.nodes.iter().map(|&v| mesh.nodes[v as usize]));
                 now.extend(el.nodes.iter().map(|&v| x[v as usize]));
-                let origin = now[0];
-                let volume = mesh
-                    .element_triangles(e)
-                    .map(|t| {
-                        cleave_kernels::tet::signed_volume(origin, x[t[0] as usize], x[t[1] as usize], x[t[2] as usize])
-                    })
-                    .sum();
+                let volume = mesh.element_volume_at(e, x);
                 (e, volume, diameter(now) / diameter(rest))
             });
             return out;
         }
-        let mesh = sim.mesh();
         for b in &sim.store().batches {
             let k = b.k;
             out.scan(b.len(), |i, now, _| {
@@ -271,17 +263,7 @@ impl ShapeExtremes {
                 } else {
                     // over the mesh's face triangles: every kind of element
                     // has them (the store keeps its own only for some)
-                    let origin = now[0];
-                    mesh.element_triangles(e)
-                        .map(|t| {
-                            cleave_kernels::tet::signed_volume(
-                                origin,
-                                x[t[0] as usize],
-                                x[t[1] as usize],
-                                x[t[2] as usize],
-                            )
-                        })
-                        .sum()
+                    mesh.element_volume_at(e, x)
                 };
                 (e, volume, diameter(now) / diameter(rest))
             });
