@@ -405,7 +405,7 @@ fn a_cut_next_to_a_face_follows_the_face_instead_of_leaving_a_sliver() {
     assert_eq!(report.duplicated.len(), 4);
     // without either, the same cut makes the sliver
     let mut sliced = mesh.clone();
-    let opts = SplitOptions { snap: 0.0, min_quality: 0.0, min_spacing: 0.0 };
+    let opts = SplitOptions::exact();
     let report = cut_by_plane(&mut sliced, &plane, &opts).unwrap();
     assert_eq!(report.split.split_elements.len(), 1);
     let worst = (0..sliced.elements.len()).map(|e| sliced.element_quality(e)).fold(f64::INFINITY, f64::min);

@@ -331,6 +331,16 @@ impl PolyMesh {
         diameter(&points)
     }
 
+    /// The median of the element diameters (m); 0 without elements.
+    pub fn median_element_diameter(&self) -> f64 {
+        let mut d: Vec<f64> = (0..self.elements.len()).map(|e| self.element_diameter(e)).collect();
+        if d.is_empty() {
+            return 0.0;
+        }
+        let mid = d.len() / 2;
+        *d.select_nth_unstable_by(mid, f64::total_cmp).1
+    }
+
     /// Shape quality of element `e`: [`quality`] of its volume and
     /// diameter (1 for a regular tetrahedron, 0 for a flat element).
     pub fn element_quality(&self, e: usize) -> f64 {

@@ -118,6 +118,9 @@ pub struct Simulation {
     #[serde(skip)]
     statics: Option<StaticSystem>,
     steps: usize,
+    /// Smallest diameter of a part a cut makes (m): `min_part` times the
+    /// median element diameter of the mesh the simulation was built on.
+    part_floor: f64,
     /// Cuts run again with one more element kept whole (see
     /// [`CUT_ATTEMPTS`]).
     cut_retries: usize,
@@ -214,6 +217,7 @@ impl Simulation {
         };
         let system = StepSystem::new(params.solver, &pattern, params.tolerance, params.max_iterations);
         let (state, surface) = (NodeState::at_rest(rest(&mesh, &elements)), mesh.boundary_triangles());
+        let part_floor = params.min_part * mesh.median_element_diameter();
         let mut sim = Simulation {
             mesh,
             params,
@@ -231,6 +235,7 @@ impl Simulation {
             system,
             statics: None,
             steps: 0,
+            part_floor,
             cut_retries: 0,
             faces_integrated: 0,
             refine_levels: Vec::new(),

@@ -37,6 +37,17 @@ pub struct SimulationParams {
     pub max_iterations: usize,
     /// How cuts split elements: snapping and the health of the parts.
     pub cut: SplitOptions,
+    /// Smallest diameter of a part a cut makes, as a fraction of the
+    /// body's median rest element diameter when the simulation is built
+    /// (it raises `cut.min_diameter` to that length). Default `0.1`. Every
+    /// split already keeps its parts above about `cut.snap` of their
+    /// element, but cuts through the same place compound: the soak's
+    /// 75th cut left a lone tetrahedron of 1.3 cm in a bunny whose median
+    /// element spans 0.72 m, and the floor's penalty contact, meeting a
+    /// body that moves about its own size in a step, tore it apart
+    /// (stretch 10 at 1 m/s, dt 0.01 s). A part below the floor is not
+    /// made: its element is kept whole and the cut follows its faces.
+    pub min_part: f64,
 }
 
 impl Default for SimulationParams {
@@ -53,6 +64,7 @@ impl Default for SimulationParams {
             tolerance: 1e-8,
             max_iterations: 2000,
             cut: SplitOptions::default(),
+            min_part: 0.1,
         }
     }
 }
@@ -73,6 +85,13 @@ impl SimulationParams {
         }
         if self.max_iterations == 0 {
             return Err(ParamError::new("max_iterations", 0, "must be at least 1"));
+        }
+        if !(self.min_part >= 0.0 && self.min_part < 1.0) {
+            return Err(ParamError::new(
+                "min_part",
+                self.min_part,
+                "must lie in [0, 1) (fraction of the median element diameter)",
+            ));
         }
         self.cut.check()
     }

@@ -6,7 +6,7 @@
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
     conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, open_pinched_nodes, pinched_nodes,
-    polygon_plane, CutReport, NodeOrigins, PolygonCutReport, Rollback,
+    polygon_plane, CutReport, NodeOrigins, PolygonCutReport, Rollback, SplitOptions,
 };
 use crate::Error;
 
@@ -21,7 +21,7 @@ impl Simulation {
     /// columns of their nodes are rebuilt. On error the simulation is left
     /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
-        let opts = self.params.cut;
+        let opts = self.cut_options();
         let cut = |mesh: &mut PolyMesh, keep: &[u32]| -> Result<PolygonCutReport, Error> {
             let cut = cut_by_plane_keeping(mesh, plane, &opts, keep)?;
             Ok(PolygonCutReport { cut, pocket: None })
@@ -35,8 +35,16 @@ impl Simulation {
     /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
         let plane = polygon_plane(polygon)?;
-        let opts = self.params.cut;
+        let opts = self.cut_options();
         self.cut(&plane, |mesh, keep| Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep)?))
+    }
+
+    /// The split options of a cut: the parameters' with their
+    /// `min_diameter` raised to the body's part floor
+    /// ([`super::SimulationParams::min_part`]).
+    fn cut_options(&self) -> SplitOptions {
+        let opts = self.params.cut;
+        SplitOptions { min_diameter: opts.min_diameter.max(self.part_floor), ..opts }
     }
 
     /// Runs `cut` (a cut along `plane`, leaving the elements it is given

@@ -51,17 +51,25 @@ pub struct SplitOptions {
     /// Smallest distance between two nodes of an element the split makes or
     /// changes, as a fraction of that element's diameter. Default `0.05`.
     pub min_spacing: f64,
+    /// Smallest diameter a part may have (m). Default `0`: no floor. Each
+    /// split's parts span at least about `snap` of their element, but
+    /// cuts through the same region compound that, and a part a hundredth
+    /// of its original element, moving its own size in a step, is torn
+    /// apart by contact; a simulation's cuts set this floor from the body
+    /// (see [`crate::sim::SimulationParams::min_part`]).
+    pub min_diameter: f64,
 }
 
 impl Default for SplitOptions {
-    /// `snap = 0.1`, `min_quality = 0.02`, `min_spacing = 0.05`: measured on
+    /// `snap = 0.1`, `min_quality = 0.02`, `min_spacing = 0.05`, no
+    /// `min_diameter`: measured on
     /// the bunny and random convex boxes cut by hundreds of planes, these
     /// keep the seventh eigenvalue of every element's `K_e` above `1e-4` of
     /// its largest (1e-11 before snapping) and every lumped mass above a
     /// few percent of its elements' mean nodal mass, while snapping bends a
     /// cap by at most a tenth of its element.
     fn default() -> Self {
-        SplitOptions { snap: 0.1, min_quality: 0.02, min_spacing: 0.05 }
+        SplitOptions { snap: 0.1, min_quality: 0.02, min_spacing: 0.05, min_diameter: 0.0 }
     }
 }
 
@@ -71,11 +79,11 @@ impl SplitOptions {
     /// building convex cells of an exact plane arrangement; a simulation's
     /// cuts use the defaults).
     pub fn exact() -> Self {
-        SplitOptions { snap: 0.0, min_quality: 0.0, min_spacing: 0.0 }
+        SplitOptions { snap: 0.0, min_quality: 0.0, min_spacing: 0.0, min_diameter: 0.0 }
     }
 
     /// Checks `snap ∈ [0, 0.5)`, `min_quality ∈ [0, 1)`, `min_spacing ∈
-    /// [0, 0.5)`.
+    /// [0, 0.5)`, `min_diameter` finite and `>= 0`.
     pub fn check(&self) -> Result<(), crate::param::ParamError> {
         use crate::param::ParamError;
         if !(self.snap >= 0.0 && self.snap < 0.5) {
@@ -91,7 +99,7 @@ impl SplitOptions {
                 "must lie in [0, 0.5) (fraction of a diameter)",
             ));
         }
-        Ok(())
+        crate::param::non_negative("min_diameter", self.min_diameter, "must be a finite number >= 0 (m)").map(|_| ())
     }
 }
 
@@ -436,6 +444,7 @@ fn split_is_healthy(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], plane:
             .map(|(i, j)| norm(sub(xs[i], xs[j])))
             .fold(f64::INFINITY, f64::min);
         star && quality(volume, d) >= opts.min_quality
+            && d >= opts.min_diameter
             && spacing >= opts.min_spacing * d
             && fold_depth(&keyed) <= (opts.snap + CAP_PLANARITY) * d
     })
