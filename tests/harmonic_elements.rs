@@ -161,3 +161,35 @@ fn non_star_shaped_element_is_integrated_over_its_pieces() {
     println!("{} quadrature points, λ7/λmax {:.2e}", b.points_per_element, b.stiffness_ratio[0]);
     assert!(b.stiffness_ratio[0] > 1e-4);
 }
+
+/// Copies of an element moved by a translation share one fit (the store
+/// fits each shape once): each copy's `K_e` is the one the copy gets when
+/// built alone, to rounding. A copy scaled by `1 + 1e-6` is another shape
+/// and is fitted on its own: a cache that took it for the first (a key
+/// relative to the diameter is blind to scale) would give it a `K_e` off
+/// by 1e-6.
+#[test]
+fn translated_copies_share_a_fit_and_scaled_ones_do_not() {
+    let one = cleave::meshing::element_with_vertices(12).unwrap();
+    let mut mesh = cleave::meshing::replicate(&one, 3).unwrap();
+    let per = one.nodes.len();
+    let first = mesh.nodes[2 * per];
+    mesh.nodes[2 * per..]
+        .iter_mut()
+        .for_each(|p| *p = std::array::from_fn(|d| first[d] + (1.0 + 1e-6) * (p[d] - first[d])));
+    let options = harmonic(false);
+    let together = ElementStore::build(&mesh, &material(), &options).unwrap();
+    let b = &together.batches[0];
+    assert_eq!((b.kind, b.len()), (ElementKind::Harmonic, 3));
+    let n = (3 * b.k) * (3 * b.k);
+    for e in 0..3 {
+        let (alone_mesh, _) = mesh.extract(&[e]).unwrap();
+        let alone = ElementStore::build(&alone_mesh, &material(), &options).unwrap();
+        let i = b.elements.iter().position(|&x| x as usize == e).unwrap();
+        let (shared, own) = (&b.stiffness[i * n..(i + 1) * n], &alone.batches[0].stiffness[..n]);
+        let scale = own.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let diff = shared.iter().zip(own).fold(0.0f64, |m, (a, b)| m.max((a - b).abs())) / scale;
+        println!("copy {e}: K_e differs from its own fit by {diff:.2e}");
+        assert!(diff < 1e-9, "copy {e}: K_e differs from its own fit by {diff:.2e}");
+    }
+}

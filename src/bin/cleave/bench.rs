@@ -168,7 +168,10 @@ fn per_element(copies: usize, k: usize, name: String, ms: f64, extra: Option<(St
 }
 
 /// Harmonic elements per vertex count: basis construction + `K_e` per
-/// element on one thread and on all, and the evaluation kernel per point
+/// element on one thread and on all, each copy of the element scaled a
+/// little (by `1 + 1e-6 c`) so that every one is fitted; then the same on
+/// translated copies only, which share one fit (see
+/// `store::harmonic::congruence`); and the evaluation kernel per point
 /// against the mean value kernel at the same points.
 fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measurement>, Error> {
     use cleave::store::{harmonic, Family, HarmonicOptions};
@@ -185,10 +188,18 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
     let mut out = Vec::new();
     for k in [8, 12, 24, 40] {
         let Some(one) = element_with_vertices(k) else { continue };
-        let batch = replicate(&one, copies)?;
+        let congruent = replicate(&one, copies)?;
+        let mut batch = congruent.clone();
+        let per = one.nodes.len();
+        for (i, chunk) in batch.nodes.chunks_mut(per).enumerate() {
+            let (first, s) = (chunk[0], 1.0 + 1e-6 * i as f64);
+            chunk.iter_mut().for_each(|p| *p = std::array::from_fn(|d| first[d] + s * (p[d] - first[d])));
+        }
         let (all_ms, store) = best_ms(3, || ElementStore::build(&batch, material, &options));
         store?;
         let (one_ms, store) = best_ms(3, || single.install(|| ElementStore::build(&batch, material, &options)));
+        store?;
+        let (shared_ms, store) = best_ms(3, || ElementStore::build(&congruent, material, &options));
         store?;
         // evaluation at the mean value rule's points, against that kernel
         let faces = harmonic::face_bases(&one, &[0], &options.harmonic)?;
@@ -200,7 +211,8 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
         let m = |name, ms, extra| per_element(copies, k, name, ms, extra);
         let kernels = ("kernels".to_string(), basis.centres.len() as f64);
         out.push(m(format!("harmonic basis+K_e k={k} (1 thread)"), one_ms, Some(kernels.clone())));
-        out.push(m(format!("harmonic basis+K_e k={k}"), all_ms, Some(kernels)));
+        out.push(m(format!("harmonic basis+K_e k={k}"), all_ms, Some(kernels.clone())));
+        out.push(m(format!("harmonic basis+K_e k={k} (congruent copies)"), shared_ms, Some(kernels)));
         let per_point = |ms: f64| points as f64 / (ms * 1e-3);
         out.push(m(
             format!("harmonic eval k={k} (1 thread)"),

@@ -44,6 +44,16 @@ pub struct ElementBasis {
 }
 
 impl ElementBasis {
+    /// The same functions moved by `offset` (m): `N'(x) = N(x - offset)`,
+    /// the basis of a copy of the element translated by it.
+    pub fn translated(&self, offset: [f64; 3]) -> ElementBasis {
+        ElementBasis {
+            centres: self.centres.iter().map(|&c| add(c, offset)).collect(),
+            origin: add(self.origin, offset),
+            ..self.clone()
+        }
+    }
+
     /// The functions in the layout of the evaluation kernel.
     pub fn functions(&self) -> MfsFunctions<'_> {
         MfsFunctions { centres: &self.centres, weights: &self.weights, linear: &self.linear, origin: self.origin }

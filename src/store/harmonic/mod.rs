@@ -20,6 +20,7 @@
 //! and the patch test passes whatever the MFS error. Masses are lumped by
 //! row scaling of the consistent mass (HRZ), which keeps them positive.
 
+mod congruence;
 mod element;
 mod face;
 mod mfs;
@@ -31,6 +32,7 @@ use cleave_kernels::quadrature::{cone_rule, shift_gradients, volume_centroid};
 use cleave_kernels::tet::signed_volume;
 use cleave_kernels::{elasticity, vec3};
 use rayon::prelude::*;
+use std::collections::HashMap;
 
 pub(crate) use element::winding_number;
 pub use element::{element_basis, ElementBasis};
@@ -233,6 +235,9 @@ pub fn element_rule(
     Some((points, weights))
 }
 
+/// A quadrature rule: points (m) and weights (m³).
+type Rule = (Vec<[f64; 3]>, Vec<f64>);
+
 /// Per-thread scratch of the batch build.
 struct Scratch {
     phi: Vec<f64>,
@@ -254,22 +259,32 @@ pub(super) fn build_batch(
     elements: Vec<u32>,
 ) -> Result<Batch, BasisError> {
     let (lambda, mu) = material.lame();
+    // elements equal up to a translation share one fit and one rule
+    // (see [`congruence`]): both are made for the first of each shape
+    let template = congruence::templates(mesh, &elements);
+    let firsts: Vec<usize> = (0..elements.len()).filter(|&i| template[i] == i).collect();
     // the rules first: elements sliced for want of a star point have more
     // points, and the batch holds as many per element as the largest rule
     // (the others padded with points of zero weight)
-    let rules: Vec<(Vec<[f64; 3]>, Vec<f64>)> = elements
+    let fitted: Vec<(usize, Rule, ElementBasis)> = firsts
         .par_iter()
-        .map(|&e| {
+        .map(|&i| {
+            let e = elements[i];
             let el = &mesh.elements[e as usize];
             let verts: Vec<[f64; 3]> = el.nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
             let local = |g: u32| el.nodes.binary_search(&g).map(|i| i as u32).unwrap_or(0);
             let triangles: Vec<[u32; 3]> = mesh.element_triangles(e as usize).map(|t| t.map(local)).collect();
-            element_rule(&verts, &triangles, mesh.element_diameter(e as usize), options.quadrature_order)
-                .ok_or(BasisError::NotStarShaped { element: e as usize })
+            let rule = element_rule(&verts, &triangles, mesh.element_diameter(e as usize), options.quadrature_order)
+                .ok_or(BasisError::NotStarShaped { element: e as usize })?;
+            let basis = element_basis(mesh, e as usize, faces, options)
+                .ok_or(BasisError::HarmonicFit { element: e as usize })?;
+            Ok((i, rule, basis))
         })
-        .collect::<Result<_, _>>()?;
-    let rule_of: std::collections::HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
-    let nq = rules.iter().map(|r| r.0.len()).max().unwrap_or(0);
+        .collect::<Result<_, BasisError>>()?;
+    let of_template: HashMap<usize, usize> = fitted.iter().enumerate().map(|(t, f)| (f.0, t)).collect();
+    let elements_of_batch = elements.clone();
+    let index_of: HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
+    let nq = fitted.iter().map(|f| f.1 .0.len()).max().unwrap_or(0);
     let scratch = || Scratch {
         phi: vec![0.0; k * nq],
         grad: vec![0.0; 3 * k * nq],
@@ -280,9 +295,13 @@ pub(super) fn build_batch(
     fill_batch(mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
         let Slots { element, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
         let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
-        let (rule_points, rule_weights) = &rules[rule_of[&(element as u32)]];
+        let i = index_of[&(element as u32)];
+        let (first, (rule_points, rule_weights), fit) = &fitted[of_template[&template[i]]];
+        let shift = congruence::offset(mesh, elements_of_batch[*first], element as u32);
         let m = rule_points.len();
-        points[..m].copy_from_slice(rule_points);
+        for (p, q) in points[..m].iter_mut().zip(rule_points) {
+            *p = vec3::add(*q, shift);
+        }
         weights[..m].copy_from_slice(rule_weights);
         // padding: a point of the rule, weighted zero
         points[m..].fill(rule_points[0]);
@@ -292,7 +311,7 @@ pub(super) fn build_batch(
             return Err(degenerate());
         }
         *volume = v;
-        let basis = element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?;
+        let basis = fit.translated(shift);
         harmonic::evaluate(&basis.functions(), points, &mut s.phi, &mut s.grad, MemStack::new(&mut s.stack));
         boundary_moments(mesh, element, faces, &mut s.moments);
         shift_gradients(weights, &mut s.grad, &s.moments);
