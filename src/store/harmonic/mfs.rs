@@ -94,18 +94,18 @@ pub(super) fn fit<const D: usize>(
     if m < cols {
         return None;
     }
-    let mut a = Mat::<f64>::zeros(m, cols);
     let row_weight = |i: usize| if i < k { NODE_WEIGHT } else { 1.0 };
-    for (i, c) in collocation.iter().enumerate() {
-        let w = row_weight(i);
-        for (j, kc) in centres.iter().enumerate() {
-            a[(i, j)] = w * kernel::<D>(distance(*c, *kc));
-        }
-        for d in 0..D {
-            a[(i, n + d)] = w * c[d];
-        }
-        a[(i, n + D)] = w;
-    }
+    // filled column by column, as faer stores it (row by row, every write
+    // of the kernel block fell on another cache line)
+    let mut a = Mat::<f64>::from_fn(m, cols, |i, j| {
+        let c = collocation[i];
+        let v = match j {
+            j if j < n => kernel::<D>(distance(c, centres[j])),
+            j if j < n + D => c[j - n],
+            _ => 1.0,
+        };
+        row_weight(i) * v
+    });
     let system = a.clone();
     let mut rhs = Mat::<f64>::from_fn(m, k, |i, a| row_weight(i) * targets[i * k + a]);
     let block = factor::recommended_block_size::<f64>(m, cols);
