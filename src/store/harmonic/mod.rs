@@ -263,10 +263,15 @@ pub(super) fn build_batch(
     // (see [`congruence`]): both are made for the first of each shape
     let template = congruence::templates(mesh, &elements);
     let firsts: Vec<usize> = (0..elements.len()).filter(|&i| template[i] == i).collect();
+    let mut copies = vec![0usize; elements.len()];
+    template.iter().for_each(|&t| copies[t] += 1);
     // the rules first: elements sliced for want of a star point have more
     // points, and the batch holds as many per element as the largest rule
-    // (the others padded with points of zero weight)
-    let fitted: Vec<(usize, Rule, ElementBasis)> = firsts
+    // (the others padded with points of zero weight); the fits of shapes
+    // with copies too, while an element of a shape of its own is fitted
+    // when its slots are filled (so that no more fits are held at once
+    // than there are threads: a 24-node fit is about 50 kB)
+    let fitted: Vec<(usize, Rule, Option<ElementBasis>)> = firsts
         .par_iter()
         .map(|&i| {
             let e = elements[i];
@@ -276,8 +281,10 @@ pub(super) fn build_batch(
             let triangles: Vec<[u32; 3]> = mesh.element_triangles(e as usize).map(|t| t.map(local)).collect();
             let rule = element_rule(&verts, &triangles, mesh.element_diameter(e as usize), options.quadrature_order)
                 .ok_or(BasisError::NotStarShaped { element: e as usize })?;
-            let basis = element_basis(mesh, e as usize, faces, options)
-                .ok_or(BasisError::HarmonicFit { element: e as usize })?;
+            let fit = || {
+                element_basis(mesh, e as usize, faces, options).ok_or(BasisError::HarmonicFit { element: e as usize })
+            };
+            let basis = if copies[i] > 1 { Some(fit()?) } else { None };
             Ok((i, rule, basis))
         })
         .collect::<Result<_, BasisError>>()?;
@@ -311,7 +318,10 @@ pub(super) fn build_batch(
             return Err(degenerate());
         }
         *volume = v;
-        let basis = fit.translated(shift);
+        let basis = match fit {
+            Some(fit) => fit.translated(shift),
+            None => element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?,
+        };
         harmonic::evaluate(&basis.functions(), points, &mut s.phi, &mut s.grad, MemStack::new(&mut s.stack));
         boundary_moments(mesh, element, faces, &mut s.moments);
         shift_gradients(weights, &mut s.grad, &s.moments);
