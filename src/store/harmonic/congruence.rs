@@ -6,9 +6,10 @@
 //! fitted functions and quadrature rule moved by its offset.
 //!
 //! Two elements have the same shape when their vertices, in element-local
-//! order and relative to the first, agree to [`QUANTUM`] of the diameter
-//! (a translation's rounding, `1e-16` of the coordinates, is far below
-//! it; a copy scaled by even `1 + 1e-9` is another shape), and their faces are the same loops of local vertices with the
+//! order and relative to the first, agree to [`QUANTUM`] of the binade of
+//! their diameter (a translation's rounding, `1e-16` of the coordinates,
+//! is far below it; a copy scaled by even `1 + 1e-9` is another shape),
+//! and their faces are the same loops of local vertices with the
 //! same orientation. A copy's functions then differ from a fit of its own
 //! by about that quantum, far below the fit's own error (`1e-3` and up at
 //! the collocation points); its gradients are still shifted to its own
@@ -20,8 +21,8 @@ use cleave_kernels::vec3::sub;
 
 use crate::mesh::PolyMesh;
 
-/// Resolution of a shape key, relative to the element's diameter
-/// (`2^-40`, about `9e-13`).
+/// Resolution of a shape key, relative to the power of two at or below
+/// the element's diameter (`2^-40`, about `9e-13`).
 pub const QUANTUM: f64 = 1.0 / (1u64 << 40) as f64;
 
 /// The elements of a batch grouped by shape: `template[i]` is the index

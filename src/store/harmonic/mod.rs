@@ -288,7 +288,9 @@ pub(super) fn build_batch(
             Ok((i, rule, basis))
         })
         .collect::<Result<_, BasisError>>()?;
-    let of_template: HashMap<usize, usize> = fitted.iter().enumerate().map(|(t, f)| (f.0, t)).collect();
+    // where in `fitted` the template of each batch element is
+    let mut fit_of = vec![usize::MAX; elements.len()];
+    fitted.iter().enumerate().for_each(|(t, f)| fit_of[f.0] = t);
     let elements_of_batch = elements.clone();
     let index_of: HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
     let nq = fitted.iter().map(|f| f.1 .0.len()).max().unwrap_or(0);
@@ -303,7 +305,7 @@ pub(super) fn build_batch(
         let Slots { element, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
         let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
         let i = index_of[&(element as u32)];
-        let (first, (rule_points, rule_weights), fit) = &fitted[of_template[&template[i]]];
+        let (first, (rule_points, rule_weights), fit) = &fitted[fit_of[template[i]]];
         let shift = congruence::offset(mesh, elements_of_batch[*first], element as u32);
         let m = rule_points.len();
         for (p, q) in points[..m].iter_mut().zip(rule_points) {
