@@ -24,3 +24,18 @@ mod pattern;
 pub use constraints::Constraints;
 pub use couplings::{Couplings, MAX_ENTRY_BLOCKS};
 pub use pattern::SparsePattern;
+
+/// Asks the CPU to bring the cache line holding `value` into its caches
+/// (a hint with no effect on results; nothing off x86-64).
+#[inline(always)]
+pub fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch never faults, and `value` is a valid reference.
+    #[allow(unused_unsafe)]
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((value as *const T).cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
+}

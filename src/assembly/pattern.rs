@@ -154,15 +154,20 @@ unsafe impl Send for SharedValues {}
 unsafe impl Sync for SharedValues {}
 
 impl SharedValues {
-    /// Adds `v` to entry `i`.
-    ///
-    /// # Safety
-    /// `i` must be in bounds and no other thread may access entry `i` now.
+    /// The pointer (read through a method so that a closure captures the
+    /// whole `Sync` wrapper, and keeps the pointer in a register).
     #[inline(always)]
-    unsafe fn add(&self, i: usize, v: f64) {
-        unsafe { *self.0.add(i) += v };
+    fn get(&self) -> *mut f64 {
+        self.0
     }
 }
+
+/// How many incidences ahead [`SparsePattern::assemble_prefetched`] asks
+/// for an element's data: mesh node ids need not be spatially coherent, so
+/// the elements around consecutive nodes lie anywhere in memory, and each
+/// read would otherwise wait on memory (bunny_100k, one thread: 24 ms
+/// without the hint, 14 ms with it).
+const PREFETCH_AHEAD: usize = 4;
 
 /// The incidences of one node being laid out.
 enum Column<'a> {
@@ -397,27 +402,47 @@ impl SparsePattern {
     where
         F: Fn(usize, usize, usize, &mut [[f64; 9]]) + Sync,
     {
+        self.assemble_prefetched(values, blocks, |_, _| {});
+    }
+
+    /// [`SparsePattern::assemble`], calling `prefetch(batch, element)` a few
+    /// incidences before `blocks` reads that element, so that its data is
+    /// on its way to the cache (a hint: results do not depend on it).
+    pub fn assemble_prefetched<F, P>(&self, values: &mut [f64], blocks: F, prefetch: P)
+    where
+        F: Fn(usize, usize, usize, &mut [[f64; 9]]) + Sync,
+        P: Fn(usize, usize) + Sync,
+    {
         assert_eq!(values.len(), self.nnz());
         let shared = SharedValues(values.as_mut_ptr());
         let col_ptr = self.symbolic.col_ptr();
         // one column of blocks per task, on the stack (no allocation)
         let column = || [[0.0f64; 9]; MAX_ENTRY_BLOCKS];
         (0..self.num_blocks).into_par_iter().with_min_len(64).for_each_init(column, |scratch, j| {
+            let values = shared.get();
             let (stride, base) = (self.col_stride[j], col_ptr[3 * j]);
+            // SAFETY (every write below): entries of columns 3j..3j+3
+            // belong to this node task only, and lie in `values`
             for p in col_ptr[3 * j]..col_ptr[3 * j + 3] {
-                // SAFETY: entries of columns 3j..3j+3 belong to this node task only.
-                unsafe { *shared.0.add(p) = 0.0 };
+                unsafe { *values.add(p) = 0.0 };
             }
-            for inc in &self.incidences[self.offsets[j] as usize..self.offsets[j + 1] as usize] {
+            let (first, end) = (self.offsets[j] as usize, self.offsets[j + 1] as usize);
+            for t in first..end {
+                if let Some(ahead) = self.incidences.get(t + PREFETCH_AHEAD) {
+                    prefetch(ahead.batch as usize, ahead.element as usize);
+                }
+                let inc = &self.incidences[t];
                 let slots = &self.slots[inc.slots as usize..(inc.slots + inc.size) as usize];
                 let scratch = &mut scratch[..slots.len()];
                 blocks(inc.batch as usize, inc.element as usize, inc.local as usize, scratch);
                 for (kab, &slot) in scratch.iter().zip(slots) {
                     for c in 0..3 {
-                        for r in 0..3 {
-                            // SAFETY: `slot + c * stride + r` lies in column 3j + c
-                            // (built above), which only this node task writes.
-                            unsafe { shared.add(base + slot as usize + c * stride + r, kab[3 * r + c]) };
+                        // column 3j + c of block (a, j): three consecutive rows
+                        let col = unsafe { values.add(base + slot as usize + c * stride) };
+                        unsafe {
+                            *col += kab[c];
+                            *col.add(1) += kab[3 + c];
+                            *col.add(2) += kab[6 + c];
                         }
                     }
                 }

@@ -633,6 +633,13 @@ impl Discretization for DgElements {
             _ => self.boundary_column(entry, b, scale, out),
         }
     }
+    fn prefetch(&self, group: usize, entry: usize) {
+        // element entries as the nodal families; a face entry's data is
+        // read in the order faces are stored
+        if group < self.store.batches.len() {
+            self.corotation.prefetch(&self.store, group, entry);
+        }
+    }
     fn rest_stiffness_column(&self, group: usize, entry: usize, b: usize, out: &mut [[f64; 9]]) {
         let nb = self.store.batches.len();
         match group {

@@ -15,6 +15,7 @@ use cleave_kernels::elasticity::block;
 use cleave_kernels::rotation::{polar_rotations, rotation_matrix};
 use rayon::prelude::*;
 
+use crate::assembly::prefetch;
 use crate::store::{Batch, ElementStore, StoreChanges};
 
 /// Elements per parallel task of the per-element passes.
@@ -262,6 +263,27 @@ impl Corotation {
     #[inline]
     pub fn force(&self, store: &ElementStore, batch: usize, i: usize, a: usize) -> [f64; 3] {
         self.batches[batch].force[i * store.batches[batch].k + a]
+    }
+
+    /// Prefetches what [`Corotation::block_column`] reads of entry `i` of
+    /// `batch`: its rotated gradients and volume (tetrahedra), or its
+    /// rotation and the start of `K_e`.
+    #[inline]
+    pub fn prefetch(&self, store: &ElementStore, batch: usize, i: usize) {
+        let (bt, st) = (&store.batches[batch], &self.batches[batch]);
+        let k = bt.k;
+        if bt.is_tet() {
+            if let (Some(a), Some(b), Some(v)) =
+                (st.rotated_grads.get(i * k), st.rotated_grads.get((i + 1) * k - 1), bt.volume.get(i))
+            {
+                prefetch(a);
+                prefetch(b);
+                prefetch(v);
+            }
+        } else if let (Some(r), Some(ke)) = (st.rotation.get(i), bt.stiffness.get(i * 9 * k * k)) {
+            prefetch(r);
+            prefetch(ke);
+        }
     }
 
     /// The warped blocks `scale R K_ab Rᵀ` (N/m, row-major) of entry `i` of

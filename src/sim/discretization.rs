@@ -29,6 +29,9 @@ pub trait Discretization: Couplings {
     /// the rotations of the last update) of the entry, for every local `a`
     /// and the given local `b`.
     fn stiffness_column(&self, group: usize, entry: usize, b: usize, scale: f64, out: &mut [[f64; 9]]);
+    /// A hint that the entry's data for [`Discretization::stiffness_column`]
+    /// is about to be read.
+    fn prefetch(&self, group: usize, entry: usize);
     /// The rest-state (unwarped) stiffness blocks `K_ab` (N/m) of the entry
     /// for every local `a` and the given local `b`.
     fn rest_stiffness_column(&self, group: usize, entry: usize, b: usize, out: &mut [[f64; 9]]);
@@ -77,6 +80,10 @@ impl Discretization for NodalElements {
     #[inline]
     fn stiffness_column(&self, group: usize, entry: usize, b: usize, scale: f64, out: &mut [[f64; 9]]) {
         self.corotation.block_column(&self.store, group, entry, b, scale, out)
+    }
+    #[inline]
+    fn prefetch(&self, group: usize, entry: usize) {
+        self.corotation.prefetch(&self.store, group, entry)
     }
     #[inline]
     fn rest_stiffness_column(&self, group: usize, entry: usize, b: usize, out: &mut [[f64; 9]]) {
@@ -161,6 +168,10 @@ impl Discretization for Model {
     #[inline]
     fn stiffness_column(&self, group: usize, entry: usize, b: usize, scale: f64, out: &mut [[f64; 9]]) {
         dispatch!(self, d => d.stiffness_column(group, entry, b, scale, out))
+    }
+    #[inline]
+    fn prefetch(&self, group: usize, entry: usize) {
+        dispatch!(self, d => d.prefetch(group, entry))
     }
     #[inline]
     fn rest_stiffness_column(&self, group: usize, entry: usize, b: usize, out: &mut [[f64; 9]]) {

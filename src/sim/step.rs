@@ -183,7 +183,8 @@ fn forces(
 
 /// Phase 2: the warped stiffness times `c_k = h² + h β` into the values.
 fn assemble(elements: &impl Discretization, pattern: &SparsePattern, c_k: f64, system: &mut StepSystem) {
-    pattern.assemble(&mut system.values, |b, i, bb, out| elements.stiffness_column(b, i, bb, c_k, out));
+    let blocks = |b, i, bb, out: &mut [[f64; 9]]| elements.stiffness_column(b, i, bb, c_k, out);
+    pattern.assemble_prefetched(&mut system.values, blocks, |b, i| elements.prefetch(b, i));
 }
 
 /// Phase 3a: the mass `c_m M` on the diagonal and the right-hand side
