@@ -138,7 +138,7 @@ def main(mesh_path, cleave_json):
     rows["cholesky numeric"]["cleave"] = min(c("cholesky numeric"), c("cholesky numeric (rayon)"))
     rows["cholesky solve"]["cleave"] = c("cholesky solve")
     rows["step (cholesky)"]["cleave (corotated)"] = c("step total (cholesky)")
-    rows["step (cg)"] = {"cleave (corotated)": c("step total (cg)")}
+    rows["step (cg)"] = {"cleave (corotated)": c("step total (cg 1e-6)")}
     nnz["cleave"] = cleave["cholesky symbolic"]["extra"][1]
 
     print(f"# peers on {os.path.basename(mesh_path)}: {len(tets)} tetrahedra, {len(points)} nodes; {cpu_name()}, "

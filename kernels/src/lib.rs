@@ -40,5 +40,6 @@ pub mod quadrature;
 pub mod rotation;
 pub mod solve4;
 pub mod spectrum;
+pub mod spmv;
 pub mod tet;
 pub mod vec3;

@@ -4,11 +4,17 @@
 //! The matrix stores both triangles and is symmetric, so `y = A x` is
 //! computed row by row as `y_i = (column i) · x`, in parallel without
 //! write conflicts, reading the pattern's 3x3 block structure (one 32-bit
-//! block row index per 9 values instead of a 64-bit index per value, which
-//! halves the traffic of this memory-bound kernel). Dot products sum fixed-size chunks in parallel and the
-//! chunk sums in order, so the iterates are bitwise independent of the
-//! thread count.
+//! block row index per 9 values instead of a 64-bit index per value) and
+//! the values rounded to `f32`: this memory-bound product reads a quarter
+//! of the bytes of a scalar `f64` one. The iteration's vectors stay `f64`,
+//! and the residual it must meet is taken with the `f64` values (see
+//! [`ConjugateGradient::solve`]). One pass per iteration updates `x` and
+//! `r`, applies the preconditioner and forms both dot products; the product
+//! forms `p · A p`. Sums run over fixed chunks in parallel and the chunk
+//! sums in order, so the iterates are bitwise independent of the thread
+//! count.
 
+use cleave_kernels::spmv::{block_products, BlockColumns, Value};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
@@ -16,6 +22,10 @@ use super::{Cholesky, LinearSolver, SolveError, SolveStats};
 
 /// Chunk length of the deterministic reductions.
 const CHUNK: usize = 4096;
+
+/// Blocks per chunk of the iteration's fused passes (their sums are taken
+/// per chunk, then in order).
+const CHUNK_BLOCKS: usize = 1024;
 
 /// PCG solver (see module docs).
 pub struct ConjugateGradient {
@@ -27,12 +37,17 @@ pub struct ConjugateGradient {
     diagonal_blocks: Vec<[usize; 9]>,
     /// Inverted diagonal blocks of the current matrix.
     inverse_blocks: Vec<[f64; 9]>,
-    /// Block structure: block rows of block column `j` at
-    /// `block_rows[block_ptr[j]..block_ptr[j + 1]]`, its first value at
-    /// `value_start[j]`.
-    block_ptr: Vec<u32>,
-    block_rows: Vec<u32>,
-    value_start: Vec<usize>,
+    /// The matrix's 3x3 block structure.
+    blocks: BlockStructure,
+    /// The matrix values rounded to `f32`, for the products of the
+    /// iteration (see [`ConjugateGradient::solve`]).
+    values32: Vec<f32>,
+    /// Whether every rounded value is finite (else the iteration reads the
+    /// `f64` values).
+    rounded: bool,
+    /// Per-chunk sums of the fused passes.
+    partial: Vec<f64>,
+    partial_pairs: Vec<[f64; 2]>,
     r: Vec<f64>,
     z: Vec<f64>,
     p: Vec<f64>,
@@ -41,6 +56,44 @@ pub struct ConjugateGradient {
     rotated: Vec<f64>,
     /// The rotated rest-state preconditioner, when chosen.
     rest: Option<RestPreconditioner>,
+}
+
+/// The 3x3 block structure of a matrix in the layout of
+/// `assembly::SparsePattern`, where every block column repeats its block
+/// rows in its three scalar columns: block rows of block column `j` at
+/// `rows[ptr[j]..ptr[j + 1]]`, its first value at `start[j]`.
+#[derive(Clone, Debug, Default)]
+pub struct BlockStructure {
+    ptr: Vec<u32>,
+    rows: Vec<u32>,
+    start: Vec<usize>,
+}
+
+impl BlockStructure {
+    /// The block structure of `pattern`, or an error naming the first
+    /// block column that is not a repeated 3x3 block column.
+    pub fn new(pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<Self, SolveError> {
+        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+        let mut out = BlockStructure { ptr: vec![0], ..Default::default() };
+        for j in 0..pattern.ncols() / 3 {
+            let rows = &ri[cp[3 * j]..cp[3 * j + 1]];
+            let regular = rows.len() % 3 == 0
+                && rows.chunks(3).all(|r| r[0] % 3 == 0 && r[1] == r[0] + 1 && r[2] == r[0] + 2)
+                && (1..3).all(|c| ri[cp[3 * j + c]..cp[3 * j + c + 1]] == *rows);
+            if !regular {
+                return Err(SolveError::Analysis(format!("block column {j} is not a repeated 3x3 block column")));
+            }
+            out.start.push(cp[3 * j]);
+            out.rows.extend(rows.chunks(3).map(|r| (r[0] / 3) as u32));
+            out.ptr.push(u32::try_from(out.rows.len()).map_err(|_| SolveError::Analysis("over 2^32 blocks".into()))?);
+        }
+        Ok(out)
+    }
+
+    /// The structure as the product kernel takes it.
+    pub fn columns(&self) -> BlockColumns<'_> {
+        BlockColumns { ptr: &self.ptr, rows: &self.rows, start: &self.start }
+    }
 }
 
 /// `z = R A₀⁻¹ Rᵀ r`: the Cholesky factor of the rest-state matrix `A₀`
@@ -59,9 +112,11 @@ impl ConjugateGradient {
             max_iterations,
             diagonal_blocks: Vec::new(),
             inverse_blocks: Vec::new(),
-            block_ptr: Vec::new(),
-            block_rows: Vec::new(),
-            value_start: Vec::new(),
+            blocks: BlockStructure::default(),
+            values32: Vec::new(),
+            rounded: false,
+            partial: Vec::new(),
+            partial_pairs: Vec::new(),
             r: Vec::new(),
             z: Vec::new(),
             p: Vec::new(),
@@ -78,23 +133,85 @@ impl ConjugateGradient {
         self
     }
 
-    /// `y = A x` through the block structure (see module docs).
-    fn matvec(&self, a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mut [f64]) {
-        let val = a.parts().1;
-        y.par_chunks_mut(3).with_min_len(128).enumerate().for_each(|(j, yj)| {
-            let rows = &self.block_rows[self.block_ptr[j] as usize..self.block_ptr[j + 1] as usize];
-            let stride = 3 * rows.len();
-            let start = self.value_start[j];
-            for (c, out) in yj.iter_mut().enumerate() {
-                let col = &val[start + c * stride..start + (c + 1) * stride];
-                let mut s = 0.0;
-                for (blk, &i) in col.chunks_exact(3).zip(rows) {
-                    let xi = &x[3 * i as usize..3 * i as usize + 3];
-                    s += blk[0] * xi[0] + blk[1] * xi[1] + blk[2] * xi[2];
-                }
-                *out = s;
-            }
+    /// `y = A x` through the block structure (see module docs), for values
+    /// `val` stored as `f64` or `f32`; returns `x · y`, summed per fixed
+    /// chunk of blocks and the chunk sums in order (the same bits on any
+    /// number of threads).
+    fn matvec<T: Value>(&self, val: &[T], x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
+        let structure = self.blocks.columns();
+        y.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (yc, part))| {
+            *part = block_products(structure, val, x, c * CHUNK_BLOCKS, yc);
         });
+        partial.iter().sum()
+    }
+
+    /// `r = b - A x` with the `f64` values; returns `|r|`.
+    fn exact_residual(&mut self, values: &[f64], b: &[f64], x: &[f64]) -> f64 {
+        let (mut r, mut partial) = (std::mem::take(&mut self.r), std::mem::take(&mut self.partial));
+        self.matvec(values, x, &mut r, &mut partial);
+        self.partial = partial;
+        r.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+        self.r = r;
+        dot(&self.r, &self.r).sqrt()
+    }
+
+    /// [`ConjugateGradient::iterate`] on the values rounded to `f32`.
+    fn iterate_rounded(&mut self, goal: f64, budget: usize, x: &mut [f64]) -> Result<usize, SolveError> {
+        let values32 = std::mem::take(&mut self.values32);
+        let out = self.iterate(&values32, goal, budget, x);
+        self.values32 = values32;
+        out
+    }
+
+    /// Preconditioned CG on `A d = r` from `d = 0`, `r` the residual held
+    /// in `self.r`, adding `d` to `x`, until the recurrence residual is at
+    /// most `goal` or `budget` iterations are spent; returns the iterations.
+    fn iterate<T: Value>(
+        &mut self,
+        values: &[T],
+        goal: f64,
+        budget: usize,
+        x: &mut [f64],
+    ) -> Result<usize, SolveError> {
+        let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
+        self.precondition(&r, &mut z)?;
+        (self.r, self.z) = (r, z);
+        self.p.copy_from_slice(&self.z);
+        let mut rz = dot(&self.r, &self.z);
+        // block Jacobi is applied inside the update pass; the rotated
+        // rest-state factor needs the whole residual first
+        let blockwise = !self.rest.as_ref().is_some_and(|p| p.ready);
+        for it in 0..budget {
+            let (mut ap, mut partial) = (std::mem::take(&mut self.ap), std::mem::take(&mut self.partial));
+            let pap = self.matvec(values, &self.p, &mut ap, &mut partial);
+            (self.ap, self.partial) = (ap, partial);
+            if !(pap > 0.0) {
+                return Err(SolveError::NotPositiveDefinite { pivot: it, n: x.len() });
+            }
+            let alpha = rz / pap;
+            let inverse = blockwise.then_some(&self.inverse_blocks[..]);
+            let [rr, rz_blockwise] =
+                update(x, &mut self.r, &mut self.z, &self.p, &self.ap, inverse, alpha, &mut self.partial_pairs);
+            let residual = rr.sqrt();
+            if !residual.is_finite() {
+                return Err(SolveError::NonFinite);
+            }
+            if residual <= goal {
+                return Ok(it + 1);
+            }
+            let rz_new = if blockwise {
+                rz_blockwise
+            } else {
+                let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
+                self.precondition(&r, &mut z)?;
+                (self.r, self.z) = (r, z);
+                dot(&self.r, &self.z)
+            };
+            let beta = rz_new / rz;
+            rz = rz_new;
+            self.p.par_iter_mut().zip(&self.z).for_each(|(p, z)| *p = z + beta * *p);
+        }
+        Ok(budget)
     }
 
     fn precondition(&mut self, r: &[f64], z: &mut [f64]) -> Result<(), SolveError> {
@@ -124,6 +241,53 @@ impl ConjugateGradient {
         });
         Ok(())
     }
+}
+
+/// One pass of a CG iteration over fixed chunks of blocks: `x += α p`,
+/// `r -= α A p`, and, given the inverted diagonal blocks, `z = D⁻¹ r`;
+/// returns `[r · r, r · z]` (`r · z` is 0 without `inverse`), each summed
+/// per chunk and the chunk sums in order.
+#[allow(clippy::too_many_arguments)]
+fn update(
+    x: &mut [f64],
+    r: &mut [f64],
+    z: &mut [f64],
+    p: &[f64],
+    ap: &[f64],
+    inverse: Option<&[[f64; 9]]>,
+    alpha: f64,
+    partial: &mut [[f64; 2]],
+) -> [f64; 2] {
+    let len = 3 * CHUNK_BLOCKS;
+    (x.par_chunks_mut(len).zip(r.par_chunks_mut(len)).zip(z.par_chunks_mut(len)))
+        .zip(p.par_chunks(len).zip(ap.par_chunks(len)))
+        .zip(partial.par_iter_mut())
+        .enumerate()
+        .for_each(|(c, ((((x, r), z), (p, ap)), part))| {
+            let (mut rr, mut rz) = (0.0, 0.0);
+            for (q, (((x, r), z), (p, ap))) in x
+                .chunks_exact_mut(3)
+                .zip(r.chunks_exact_mut(3))
+                .zip(z.chunks_exact_mut(3))
+                .zip(p.chunks_exact(3).zip(ap.chunks_exact(3)))
+                .enumerate()
+            {
+                for d in 0..3 {
+                    x[d] += alpha * p[d];
+                    r[d] -= alpha * ap[d];
+                }
+                rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+                if let Some(inverse) = inverse {
+                    let m = &inverse[c * CHUNK_BLOCKS + q];
+                    for i in 0..3 {
+                        z[i] = m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2];
+                    }
+                    rz += r[0] * z[0] + r[1] * z[1] + r[2] * z[2];
+                }
+            }
+            *part = [rr, rz];
+        });
+    partial.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]])
 }
 
 /// `y = A x` for symmetric `A` stored in both triangles.
@@ -203,26 +367,12 @@ impl LinearSolver for ConjugateGradient {
             })
             .collect::<Result<_, SolveError>>()?;
         self.inverse_blocks = vec![[0.0; 9]; n / 3];
-        // block structure: every block column repeats its block rows in its
-        // three scalar columns (the layout of `assembly::SparsePattern`)
-        self.block_ptr = vec![0];
-        self.block_rows.clear();
-        self.value_start.clear();
-        for j in 0..n / 3 {
-            let rows = &ri[cp[3 * j]..cp[3 * j + 1]];
-            let regular = rows.len() % 3 == 0
-                && rows.chunks(3).all(|r| r[0] % 3 == 0 && r[1] == r[0] + 1 && r[2] == r[0] + 2)
-                && (1..3).all(|c| ri[cp[3 * j + c]..cp[3 * j + c + 1]] == *rows);
-            if !regular {
-                return Err(SolveError::Analysis(format!("block column {j} is not a repeated 3x3 block column")));
-            }
-            self.value_start.push(cp[3 * j]);
-            self.block_rows.extend(rows.chunks(3).map(|r| (r[0] / 3) as u32));
-            self.block_ptr.push(self.block_rows.len() as u32);
-        }
+        self.blocks = BlockStructure::new(pattern)?;
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
             *v = vec![0.0; n];
         }
+        let chunks = (n / 3).div_ceil(CHUNK_BLOCKS);
+        (self.partial, self.partial_pairs) = (vec![0.0; chunks], vec![[0.0; 2]; chunks]);
         Ok(())
     }
 
@@ -234,9 +384,25 @@ impl LinearSolver for ConjugateGradient {
         self.inverse_blocks.par_iter_mut().zip(&self.diagonal_blocks).for_each(|(inv, slots)| {
             *inv = invert3(slots.map(|s| val[s]));
         });
+        self.values32.resize(val.len(), 0.0);
+        // a value beyond f32's range rounds to infinity: then the
+        // iteration takes the f64 values throughout (and the chunks `all`
+        // skips after the first such value, never read, stay unconverted)
+        self.rounded = self.values32.par_chunks_mut(CHUNK).zip(val.par_chunks(CHUNK)).all(|(lo, hi)| {
+            lo.iter_mut().zip(hi).for_each(|(l, &h)| *l = h as f32);
+            lo.iter().all(|l| l.is_finite())
+        });
         Ok(())
     }
 
+    /// Mixed precision: the iteration's products read the values rounded
+    /// to `f32` (half the memory traffic of this memory-bound loop), its
+    /// vectors and sums stay `f64`. The residual it reports is `b - A x`
+    /// with the `f64` values: when the iteration meets the tolerance on the
+    /// rounded matrix but not on the exact one, it carries on from the
+    /// exact residual (iterative refinement), and should a round gain less
+    /// than a factor 2 (the rounded matrix too far from the exact one), it
+    /// iterates on the `f64` values from there.
     fn solve(
         &mut self,
         matrix: SparseColMatRef<'_, usize, f64>,
@@ -251,46 +417,34 @@ impl LinearSolver for ConjugateGradient {
             x.fill(0.0);
             return Ok(SolveStats { iterations: 0, residual: 0.0 });
         }
-        let mut ap = std::mem::take(&mut self.ap);
-        self.matvec(matrix, x, &mut ap);
-        self.ap = ap;
-        self.r.par_iter_mut().zip(b).zip(&self.ap).for_each(|((r, b), ax)| *r = b - ax);
-        let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
-        self.precondition(&r, &mut z)?;
-        (self.r, self.z) = (r, z);
-        self.p.copy_from_slice(&self.z);
-        let mut rz = dot(&self.r, &self.z);
-        let mut residual = dot(&self.r, &self.r).sqrt() / norm_b;
-        for it in 0..self.max_iterations {
-            if residual <= self.tolerance {
-                return Ok(SolveStats { iterations: it, residual });
+        let values = matrix.parts().1;
+        if self.values32.len() != values.len() {
+            return Err(SolveError::NotReady);
+        }
+        let goal = self.tolerance * norm_b;
+        let (mut iterations, mut exact) = (0, !self.rounded);
+        let mut norm_r = self.exact_residual(values, b, x);
+        loop {
+            if norm_r <= goal {
+                return Ok(SolveStats { iterations, residual: norm_r / norm_b });
             }
-            let mut ap = std::mem::take(&mut self.ap);
-            self.matvec(matrix, &self.p, &mut ap);
-            self.ap = ap;
-            let pap = dot(&self.p, &self.ap);
-            if !(pap > 0.0) {
-                return Err(SolveError::NotPositiveDefinite { pivot: it, n: b.len() });
-            }
-            let alpha = rz / pap;
-            x.par_iter_mut().zip(&self.p).for_each(|(x, p)| *x += alpha * p);
-            self.r.par_iter_mut().zip(&self.ap).for_each(|(r, ap)| *r -= alpha * ap);
-            let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
-            self.precondition(&r, &mut z)?;
-            (self.r, self.z) = (r, z);
-            let rz_new = dot(&self.r, &self.z);
-            let beta = rz_new / rz;
-            rz = rz_new;
-            self.p.par_iter_mut().zip(&self.z).for_each(|(p, z)| *p = z + beta * *p);
-            residual = dot(&self.r, &self.r).sqrt() / norm_b;
-            if !residual.is_finite() {
+            if !norm_r.is_finite() {
                 return Err(SolveError::NonFinite);
             }
+            let budget = self.max_iterations - iterations;
+            if budget == 0 {
+                return Err(SolveError::NotConverged {
+                    iterations,
+                    residual: norm_r / norm_b,
+                    tolerance: self.tolerance,
+                });
+            }
+            iterations +=
+                if exact { self.iterate(values, goal, budget, x)? } else { self.iterate_rounded(goal, budget, x)? };
+            let before = norm_r;
+            norm_r = self.exact_residual(values, b, x);
+            exact |= norm_r > 0.5 * before;
         }
-        if residual <= self.tolerance {
-            return Ok(SolveStats { iterations: self.max_iterations, residual });
-        }
-        Err(SolveError::NotConverged { iterations: self.max_iterations, residual, tolerance: self.tolerance })
     }
 
     fn set_reference(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
@@ -310,6 +464,73 @@ impl LinearSolver for ConjugateGradient {
         if let Some(rest) = self.rest.as_mut() {
             rest.frames.clear();
             rest.frames.extend_from_slice(frames);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::sparse::SymbolicSparseColMat;
+
+    /// A symmetric positive definite chain of `n` 3x3 blocks in the layout
+    /// of `assembly::SparsePattern` (each block column repeating its block
+    /// rows in its three scalar columns): `scale` times a diagonally
+    /// dominant matrix whose entries carry digits below `f32`'s precision.
+    fn chain(n: usize, scale: f64) -> (SymbolicSparseColMat<usize>, Vec<f64>) {
+        let entry = |i: usize, j: usize| -> f64 {
+            let (a, b) = (i.min(j), i.max(j));
+            if a == b {
+                return scale * (8.0 + 1e-9 * a as f64);
+            }
+            scale * (-0.5 - 1e-9 * ((a * 31 + b * 17) % 13) as f64)
+        };
+        let (mut col_ptr, mut row_idx, mut values) = (vec![0usize], Vec::new(), Vec::new());
+        for bj in 0..n {
+            let rows: Vec<usize> = (bj.saturating_sub(1)..(bj + 2).min(n)).collect();
+            for c in 0..3 {
+                for &bi in &rows {
+                    for r in 0..3 {
+                        row_idx.push(3 * bi + r);
+                        values.push(entry(3 * bi + r, 3 * bj + c));
+                    }
+                }
+                col_ptr.push(row_idx.len());
+            }
+        }
+        (SymbolicSparseColMat::new_checked(3 * n, 3 * n, col_ptr, None, row_idx), values)
+    }
+
+    /// `|b - A x| / |b|` with the `f64` values, computed apart from the solver.
+    fn residual(pattern: &SymbolicSparseColMat<usize>, values: &[f64], b: &[f64], x: &[f64]) -> f64 {
+        let mut r = vec![0.0; b.len()];
+        super::super::relative_residual(SparseColMatRef::new(pattern.as_ref(), values), b, x, &mut r)
+    }
+
+    /// The iteration reads `f32` values, but the residual it reports and
+    /// meets is the `f64` one: at a tolerance below what the rounded matrix
+    /// can reach (its entries differ from the exact ones at 1e-8), it must
+    /// refine; and a matrix beyond `f32`'s range is iterated on its `f64`
+    /// values.
+    #[test]
+    fn the_reported_residual_is_the_exact_one() {
+        for scale in [1.0, 1e40] {
+            let (pattern, values) = chain(40, scale);
+            let b: Vec<f64> = (0..120).map(|i| scale * (i as f64 * 0.37).sin()).collect();
+            let mut cg = ConjugateGradient::new(1e-13, 500);
+            cg.analyze(pattern.as_ref()).unwrap();
+            let matrix = SparseColMatRef::new(pattern.as_ref(), &values);
+            cg.factor(matrix).unwrap();
+            assert_eq!(cg.rounded, scale == 1.0, "scale {scale}: whether the f32 values are usable");
+            let mut x = vec![0.0; 120];
+            let stats = cg.solve(matrix, &b, &mut x).unwrap();
+            let exact = residual(&pattern, &values, &b, &x);
+            assert!(exact <= 1e-13, "scale {scale}: exact residual {exact:e} above the tolerance");
+            assert!(
+                (stats.residual - exact).abs() <= 1e-15,
+                "scale {scale}: reported {:e}, exact {exact:e}",
+                stats.residual
+            );
         }
     }
 }

@@ -8,7 +8,7 @@ mod cg;
 mod cholesky;
 mod envelope;
 
-pub use cg::{dot, symmetric_matvec, ConjugateGradient};
+pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
 pub use cholesky::Cholesky;
 pub use envelope::EnvelopeCholesky;
 

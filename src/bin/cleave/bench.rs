@@ -273,8 +273,8 @@ fn peer_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
     let (name, steps) = if quick { ("bunny_5k", 2) } else { ("bunny_100k", 10) };
     let mesh = cleave::io::read_mesh(&asset(&format!("{name}.mesh")))?;
     let mut out = pipeline_on(&mesh, name, &Material::new(1e7, 0.35, 1000.0)?)?;
-    out.extend(step_measurements(name, mesh.clone(), SolverKind::Cg, steps)?);
-    out.extend(step_measurements(name, mesh, SolverKind::Cholesky, 2)?);
+    out.extend(step_measurements(name, mesh.clone(), SolverKind::Cg, 1e-6, steps)?);
+    out.extend(step_measurements(name, mesh, SolverKind::Cholesky, 1e-6, 2)?);
     Ok(out)
 }
 
@@ -383,8 +383,10 @@ fn step_suite(quick: bool, material: &Material) -> Result<Vec<Measurement>, Erro
     let bunny = asset("bunny_100k.mesh");
     if !quick && bunny.exists() {
         let mesh = cleave::io::read_mesh(&bunny)?;
-        out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cg, 20)?);
-        out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cholesky, 3)?);
+        for tolerance in [1e-6, 1e-8] {
+            out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cg, tolerance, 20)?);
+        }
+        out.extend(step_measurements("bunny_100k", mesh.clone(), SolverKind::Cholesky, 1e-6, 3)?);
         out.extend(large_cut_measurements(mesh)?);
     }
     let bunny = asset("bunny_5k.mesh");
@@ -393,7 +395,8 @@ fn step_suite(quick: bool, material: &Material) -> Result<Vec<Measurement>, Erro
     }
     let cells = if quick { [16, 4, 4] } else { [100, 50, 34] };
     let mesh = box_tet([0.0; 3], [2.0, 1.0, 0.68], cells)?;
-    out.extend(step_measurements(&format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]), mesh, SolverKind::Cg, 3)?);
+    let label = format!("box_tet {}x{}x{}", cells[0], cells[1], cells[2]);
+    out.extend(step_measurements(&label, mesh, SolverKind::Cg, 1e-6, 3)?);
     Ok(out)
 }
 
@@ -594,7 +597,18 @@ fn large_cut_measurements(mesh: PolyMesh) -> Result<Vec<Measurement>, Error> {
 /// Per-phase wall time per step of `steps` corotated implicit Euler steps
 /// of a body falling onto a plane (E = 1e7 Pa, ν = 0.35, ρ = 1000 kg/m³,
 /// h = 0.01 s, CG tolerance 1e-6).
-fn step_measurements(label: &str, mesh: PolyMesh, solver: SolverKind, steps: usize) -> Result<Vec<Measurement>, Error> {
+/// The phases of `steps` corotated implicit steps of `mesh` under gravity
+/// onto a floor (CG to the relative residual `tolerance`), in ms per step,
+/// and the step in passes over `K`: its time over that of one read of as
+/// many `f64` values as `K` stores (a parallel dot product, the same
+/// threads), the memory-bound unit the step's kernels are measured in.
+fn step_measurements(
+    label: &str,
+    mesh: PolyMesh,
+    solver: SolverKind,
+    tolerance: f64,
+    steps: usize,
+) -> Result<Vec<Measurement>, Error> {
     let (ne, nn) = (mesh.elements.len(), mesh.nodes.len());
     let lowest = mesh.bounding_box().0;
     let params = SimulationParams {
@@ -604,7 +618,7 @@ fn step_measurements(label: &str, mesh: PolyMesh, solver: SolverKind, steps: usi
         mass_damping: 0.5,
         stiffness_damping: 0.001,
         solver,
-        tolerance: 1e-6,
+        tolerance,
         ..Default::default()
     };
     let mut sim = Simulation::new(mesh, params)?;
@@ -616,7 +630,12 @@ fn step_measurements(label: &str, mesh: PolyMesh, solver: SolverKind, steps: usi
     }
     let t = *sim.timings();
     let per = |x: f64, y: f64| 1e3 * (x - y) / steps as f64;
-    let kind = format!("{solver:?}").to_lowercase();
+    let kind = match solver {
+        SolverKind::Cg => format!("cg {tolerance:.0e}"),
+        _ => format!("{solver:?}").to_lowercase(),
+    };
+    let k_values = vec![1.0; sim.pattern().nnz()];
+    let (pass_ms, _) = best_ms(20, || cleave::solve::dot(&k_values, &k_values));
     let m = |name: String, ms: f64, extra: Option<(String, f64)>| Measurement {
         name,
         mesh: label.to_string(),
@@ -634,7 +653,12 @@ fn step_measurements(label: &str, mesh: PolyMesh, solver: SolverKind, steps: usi
         m(format!("step assembly ({kind})"), asm, None),
         m(format!("step contacts+constraints+integrate ({kind})"), rest, None),
         m(format!("step solve ({kind})"), sol, Some(("iterations/step".into(), iterations as f64 / steps as f64))),
-        m(format!("step total ({kind})"), per(t.steps(), before.steps()), None),
+        m(
+            format!("step total ({kind})"),
+            per(t.steps(), before.steps()),
+            Some(("passes over K".into(), per(t.steps(), before.steps()) / pass_ms)),
+        ),
+        m("one pass over K (f64 read)".into(), pass_ms, None),
     ])
 }
 

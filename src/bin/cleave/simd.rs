@@ -3,7 +3,7 @@
 //! AVX-512 forced in turn through [`cap_simd_level`]), in one run.
 //!
 //! The reference is the kernel's plain-`f64` function (`*_scalar`), except
-//! for the envelope Cholesky, which has none: its reference is the same
+//! for the block sparse product, which has none: its reference is the same
 //! code on pulp's one-lane scalar backend. Rows report the time of a fixed
 //! amount of work and the speed-up over the reference; every kernel gives
 //! the same bits at every level (their tests check it), so only speed
@@ -11,7 +11,7 @@
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
-use cleave_kernels::{elasticity, moments, polynomial, rotation};
+use cleave_kernels::{elasticity, moments, polynomial, rotation, spmv};
 
 use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
 
@@ -132,6 +132,35 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                     moments::face_moments(per, degree, &vertices, &mut moment_values, &mut planes);
                 }
             });
+            ms
+        }),
+    });
+
+    // the product of a tetrahedral box's K, stored as f32, with a vector:
+    // one conjugate gradient iteration's matrix traffic
+    let cells = if quick { [12, 6, 6] } else { [40, 20, 20] };
+    let mesh = cleave::meshing::box_tet([0.0; 3], [2.0, 1.0, 1.0], cells)?;
+    let store = cleave::store::ElementStore::build(
+        &mesh,
+        &cleave::material::Material::new(1e7, 0.3, 1000.0)?,
+        &cleave::store::BasisOptions::default(),
+    )?;
+    let pattern = cleave::assembly::SparsePattern::build(mesh.nodes.len(), &store);
+    let blocks = cleave::solve::BlockStructure::new(pattern.symbolic.as_ref())
+        .map_err(|e| Error::Internal(format!("the box's pattern: {e}")))?;
+    let values: Vec<f32> = (0..pattern.nnz()).map(|i| noise(i) as f32).collect();
+    let x: Vec<f64> = (0..3 * pattern.num_blocks).map(|i| noise(i + 1)).collect();
+    let mut y = vec![0.0; x.len()];
+    kernels.push(Kernel {
+        name: "block sparse product",
+        size: format!("K of box_tet {}x{}x{}, {} f32 values", cells[0], cells[1], cells[2], values.len()),
+        run: Box::new(move |reference| {
+            // the kernel has no plain-f64 function: its reference is the
+            // same code on pulp's one-lane scalar backend
+            if reference {
+                cap_simd_level(Some(SimdLevel::Scalar));
+            }
+            let (ms, _) = best_ms(5 * scale, || spmv::block_products(blocks.columns(), &values, &x, 0, &mut y));
             ms
         }),
     });
