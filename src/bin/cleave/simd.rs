@@ -3,15 +3,15 @@
 //! AVX-512 forced in turn through [`cap_simd_level`]), in one run.
 //!
 //! The reference is the kernel's plain-`f64` function (`*_scalar`), except
-//! for the block sparse product, which has none: its reference is the same
-//! code on pulp's one-lane scalar backend. Rows report the time of a fixed
+//! for the block sparse product and the envelope Cholesky, which have none:
+//! their reference is the same code on pulp's one-lane scalar backend. Rows report the time of a fixed
 //! amount of work and the speed-up over the reference; every kernel gives
 //! the same bits at every level (their tests check it), so only speed
 //! differs.
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
-use cleave_kernels::{elasticity, moments, polynomial, rotation, spmv};
+use cleave_kernels::{elasticity, envelope, moments, polynomial, rotation, spmv};
 
 use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
 
@@ -161,6 +161,40 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                 cap_simd_level(Some(SimdLevel::Scalar));
             }
             let (ms, _) = best_ms(5 * scale, || spmv::block_products(blocks.columns(), &values, &x, 0, &mut y));
+            ms
+        }),
+    });
+
+    // the envelope Cholesky of a banded system of the size it serves (450
+    // unknowns, 150 blocks, each coupled to the 20 blocks before it)
+    let (blocks_n, band) = (150usize, 20usize);
+    let n = 3 * blocks_n;
+    let first: Vec<u32> = (0..n).map(|i| (3 * (i / 3).saturating_sub(band)) as u32).collect();
+    let mut start = vec![0u32];
+    for (i, &f) in first.iter().enumerate() {
+        start.push(start[i] + (i + 1 - f as usize) as u32);
+    }
+    let lower: Vec<f64> = (0..n)
+        .flat_map(|i| (first[i] as usize..=i).map(move |j| if i == j { 4.0 * band as f64 } else { noise(n * i + j) }))
+        .collect();
+    let (mut factor, mut inverse_diagonal) = (lower.clone(), vec![0.0; n]);
+    let reps = 20 * scale;
+    kernels.push(Kernel {
+        name: "envelope cholesky",
+        size: format!("{reps} x {n} unknowns, bandwidth {}", 3 * band + 2),
+        run: Box::new(move |reference| {
+            let envelope = envelope::Envelope { first: &first, start: &start };
+            // no plain-f64 function either: the reference is the same code
+            // on pulp's one-lane scalar backend
+            if reference {
+                cap_simd_level(Some(SimdLevel::Scalar));
+            }
+            let (ms, ()) = best_ms(3, || {
+                for _ in 0..reps {
+                    factor.copy_from_slice(&lower);
+                    envelope::factor(&envelope, &mut factor, &mut inverse_diagonal).expect("diagonally dominant");
+                }
+            });
             ms
         }),
     });
