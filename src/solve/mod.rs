@@ -92,8 +92,8 @@ pub trait LinearSolver: Send + Sync {
 pub enum SolverKind {
     /// [`SolverKind::Cholesky`] up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`]
     /// unknowns, CG above (measured with `cleave bench`: on the 100k-tet
-    /// bunny, 53k unknowns, a CG step takes ~0.1 s and a refactorising
-    /// Cholesky step ~0.7 s).
+    /// bunny, 53k unknowns, a CG step takes ~0.06 s and a refactorising
+    /// Cholesky step ~0.7 s, 2 cores).
     #[default]
     Auto,
     /// Direct Cholesky, refactorised whenever the matrix changes: the
