@@ -121,9 +121,18 @@ impl<T: Value> pulp::WithSimd for Products<'_, T> {
 mod tests {
     use super::*;
 
+    /// A matrix as block columns (see [`BlockColumns`]) and dense.
+    struct Ring {
+        ptr: Vec<u32>,
+        rows: Vec<u32>,
+        start: Vec<usize>,
+        values: Vec<f64>,
+        dense: Vec<Vec<f64>>,
+    }
+
     /// A symmetric matrix of 3x3 blocks on a ring of `n` blocks (each
-    /// coupled to itself and its two neighbours), as block columns.
-    fn ring(n: usize) -> (Vec<u32>, Vec<u32>, Vec<usize>, Vec<f64>, Vec<Vec<f64>>) {
+    /// coupled to itself and its two neighbours).
+    fn ring(n: usize) -> Ring {
         let mut dense = vec![vec![0.0; 3 * n]; 3 * n];
         let entry = |i: usize, j: usize| ((i * 7 + j * 13) % 11) as f64 - 5.0 + 0.25 * (i + j) as f64;
         for bj in 0..n {
@@ -152,7 +161,7 @@ mod tests {
             rows.extend(&r);
             ptr.push(rows.len() as u32);
         }
-        (ptr, rows, start, values, dense)
+        Ring { ptr, rows, start, values, dense }
     }
 
     /// Against the dense product, for `f64` and `f32` values, on every
@@ -161,7 +170,7 @@ mod tests {
     #[test]
     fn products_match_the_dense_matrix_on_every_level() {
         let n = 7;
-        let (ptr, rows, start, values, dense) = ring(n);
+        let Ring { ptr, rows, start, values, dense } = ring(n);
         let structure = BlockColumns { ptr: &ptr, rows: &rows, start: &start };
         let x: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.7).sin()).collect();
         let want: Vec<f64> = dense.iter().map(|row| row.iter().zip(&x).map(|(a, b)| a * b).sum()).collect();
