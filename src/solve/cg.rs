@@ -222,7 +222,7 @@ impl ConjugateGradient {
                         o[i] = if transpose {
                             m[i] * v[0] + m[3 + i] * v[1] + m[6 + i] * v[2]
                         } else {
-                            m[3 * i] * v[0] + m[3 * i + 1] * v[1] + m[3 * i + 2] * v[2]
+                            row_times(m, i, v)
                         };
                     }
                 });
@@ -236,7 +236,7 @@ impl ConjugateGradient {
         }
         z.par_chunks_mut(3).zip(r.par_chunks(3)).zip(&self.inverse_blocks).for_each(|((z, r), m)| {
             for i in 0..3 {
-                z[i] = m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2];
+                z[i] = row_times(m, i, r);
             }
         });
         Ok(())
@@ -280,7 +280,7 @@ fn update(
                 if let Some(inverse) = inverse {
                     let m = &inverse[c * CHUNK_BLOCKS + q];
                     for i in 0..3 {
-                        z[i] = m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2];
+                        z[i] = row_times(m, i, r);
                     }
                     rz += r[0] * z[0] + r[1] * z[1] + r[2] * z[2];
                 }
@@ -288,6 +288,12 @@ fn update(
             *part = [rr, rz];
         });
     partial.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]])
+}
+
+/// Row `i` of the row-major 3x3 matrix `m` times the 3-vector `v`.
+#[inline(always)]
+fn row_times(m: &[f64; 9], i: usize, v: &[f64]) -> f64 {
+    m[3 * i] * v[0] + m[3 * i + 1] * v[1] + m[3 * i + 2] * v[2]
 }
 
 /// `y = A x` for symmetric `A` stored in both triangles.
