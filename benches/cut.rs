@@ -1,7 +1,9 @@
 //! Criterion benchmarks of cutting during a simulation: from a cut to a
 //! ready system (split, separation, rebuild of the touched elements, pattern
 //! update, CG analysis), on a box of tetrahedra after one step. Rates are
-//! per element the cut crosses (`Throughput::Elements`).
+//! per element the cut crosses (`Throughput::Elements`). And the health
+//! check every element a cut makes goes through: the stiffness spectrum
+//! estimate of a hexahedron's and a wedge's `K_e` (elements/s).
 
 use criterion::{criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, Throughput};
 
@@ -51,5 +53,54 @@ fn cut(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, cut);
+/// `K_e` (row-major) of the polyhedron on `x` made of the tetrahedra
+/// `tets`, each a linear element (E = 1e5 Pa, ν = 0.3): sound, with exactly
+/// the rigid modes in its null space.
+fn tetrahedral_stiffness(x: &[[f64; 3]], tets: &[[usize; 4]]) -> Vec<f64> {
+    use cleave_kernels::{elasticity, tet};
+    let n = 3 * x.len();
+    let (lambda, mu) = elasticity::lame(1e5, 0.3);
+    let mut k = vec![0.0; n * n];
+    for t in tets {
+        let (volume, g) = tet::gradients(&t.map(|a| x[a])).unwrap();
+        for a in 0..4 {
+            for b in 0..4 {
+                let block = elasticity::block(g[a], g[b], volume.abs(), lambda, mu);
+                for r in 0..3 {
+                    for c in 0..3 {
+                        k[(3 * t[a] + r) * n + 3 * t[b] + c] += block[3 * r + c];
+                    }
+                }
+            }
+        }
+    }
+    k
+}
+
+fn health(c: &mut Criterion) {
+    use cleave_kernels::spectrum::{spectrum_scratch_len, stiffness_spectrum, RigidModes};
+    let mut group = c.benchmark_group("health_spectrum");
+    let cube: Vec<[f64; 3]> = (0..8).map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64]).collect();
+    let wedge: Vec<[f64; 3]> =
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]];
+    let shapes = [
+        (
+            "hexahedron",
+            tetrahedral_stiffness(
+                &cube,
+                &[[0, 1, 3, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 6, 4, 7], [0, 4, 5, 7], [0, 5, 1, 7]],
+            ),
+            cube,
+        ),
+        ("wedge", tetrahedral_stiffness(&wedge, &[[0, 1, 2, 3], [1, 2, 3, 4], [2, 3, 4, 5]]), wedge),
+    ];
+    group.throughput(Throughput::Elements(1));
+    for (name, k, x) in &shapes {
+        let mut scratch = vec![0.0; spectrum_scratch_len(x.len())];
+        group.bench_function(*name, |b| b.iter(|| stiffness_spectrum(k, RigidModes::Nodal(x), &mut scratch)));
+    }
+    group.finish();
+}
+
+criterion_group!(benches, cut, health);
 criterion_main!(benches);

@@ -21,6 +21,8 @@
 
 use pulp::Simd;
 
+use crate::lanes::ordered_dot as dot;
+
 /// Lane count of the fixed-order sums.
 const LANES: usize = 4;
 
@@ -163,25 +165,6 @@ pub fn solve(envelope: &Envelope<'_>, factor: &[f64], inverse_diagonal: &[f64], 
     envelope.check(factor, inverse_diagonal);
     assert_eq!(x.len(), inverse_diagonal.len(), "one value per row");
     crate::lanes::dispatch(Solve { envelope, factor, inverse_diagonal, x });
-}
-
-/// `Σ a_k b_k` in a fixed order: [`LANES`] interleaved partial sums, then
-/// a fixed tree, then the tail.
-#[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
-    let (at, bt) = (ac.remainder(), bc.remainder());
-    let mut s = [0.0f64; LANES];
-    for (x, y) in ac.zip(bc) {
-        for l in 0..LANES {
-            s[l] += x[l] * y[l];
-        }
-    }
-    let mut sum = (s[0] + s[2]) + (s[1] + s[3]);
-    for (x, y) in at.iter().zip(bt) {
-        sum += x * y;
-    }
-    sum
 }
 
 /// The nine sums `S_rc = Σ_k a_r[k] b_c[k]` of three rows against three

@@ -288,6 +288,28 @@ impl SimdLevel {
     }
 }
 
+/// `Σ a_k b_k` in a fixed order: four interleaved partial sums, then a
+/// fixed tree, then the tail. Inlined into a dispatched kernel, the four
+/// independent sums fill wide registers, and the result is the same bits
+/// at every instruction set (no fused multiply-add, one order).
+#[inline(always)]
+pub(crate) fn ordered_dot(a: &[f64], b: &[f64]) -> f64 {
+    const LANES: usize = 4;
+    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let (at, bt) = (ac.remainder(), bc.remainder());
+    let mut s = [0.0f64; LANES];
+    for (x, y) in ac.zip(bc) {
+        for l in 0..LANES {
+            s[l] += x[l] * y[l];
+        }
+    }
+    let mut sum = (s[0] + s[2]) + (s[1] + s[3]);
+    for (x, y) in at.iter().zip(bt) {
+        sum += x * y;
+    }
+    sum
+}
+
 /// The level every kernel runs at: 0 for the best the machine offers, else
 /// `1 + SimdLevel as u8`, resolved to one the machine has when set.
 static CAP: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
