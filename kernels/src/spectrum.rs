@@ -217,7 +217,7 @@ pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes, scratch: &mut [f64]) -
     // the inverse diagonal
     for j in 0..n {
         let d = a[j * n + j];
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return Spectrum { lambda_max, lambda_7: 0.0, rigid_residual };
         }
         let d = d.sqrt();
