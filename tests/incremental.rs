@@ -11,7 +11,10 @@ use cleave::mesh::PolyMesh;
 use cleave::meshing::box_tet;
 use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementStore, HealthFloors};
-use cleave::topology::{cut_by_plane, cut_by_polygon, polygon_plane, CutReport, Rollback, SplitOptions};
+use cleave::topology::{
+    cut_by_plane, cut_by_plane_keeping, cut_by_polygon, cut_by_polygon_keeping, cut_reach, polygon_plane, CutReport,
+    CutScope, Rollback, SplitOptions,
+};
 use proptest::prelude::*;
 
 mod common;
@@ -152,7 +155,7 @@ proptest! {
         let mut mesh = before.clone();
         let corners = common::rectangle_in_plane(&plane, half, 0.3);
         let cut_plane = if polygon { polygon_plane(&corners).unwrap() } else { plane };
-        let rollback = Rollback::around_plane(&mesh, &cut_plane);
+        let rollback = Rollback::around_plane(&mesh, &cut_plane, CutScope::whole());
         if polygon {
             cut_by_polygon(&mut mesh, &corners, &SplitOptions::default()).unwrap();
         } else {
@@ -166,6 +169,67 @@ proptest! {
         }
         rollback.restore(&mut mesh);
         prop_assert!(mesh == before);
+    }
+    /// A cut that looks only at the elements holding a node within
+    /// `cut_reach` of its plane (plus those it appends) makes the same mesh
+    /// and report, and its rollback saves the same, as one over the whole
+    /// mesh; after a first cut, so that element sizes differ.
+    #[test]
+    fn a_cut_over_its_scope_equals_a_cut_over_the_whole_mesh(
+        seed in 0u64..10_000,
+        first in common::plane_strategy(0.2, 0.8),
+        plane in common::plane_strategy(0.1, 0.9),
+        polygon in any::<bool>(),
+        half in (0.1f64..0.6, 0.1f64..0.6),
+    ) {
+        let mut whole = common::cube_of_polyhedra_or_tets(seed, 6);
+        cut_by_plane(&mut whole, &first, &SplitOptions::default()).unwrap();
+        let mut scoped = whole.clone();
+        let corners = common::rectangle_in_plane(&plane, half, 0.3);
+        let cut_plane = if polygon { polygon_plane(&corners).unwrap() } else { plane };
+        let max_diameter = (0..whole.elements.len()).map(|e| whole.element_diameter(e)).fold(0.0, f64::max);
+        let reach = cut_reach(&whole, max_diameter);
+        let listed: Vec<u32> = (0..whole.elements.len() as u32)
+            .filter(|&e| whole.elements[e as usize].nodes.iter().any(|&v| cut_plane.distance(whole.nodes[v as usize]).abs() <= reach))
+            .collect();
+        let scope = CutScope::listed(&scoped, &listed);
+        let saved = (Rollback::around_plane(&whole, &cut_plane, CutScope::whole()), Rollback::around_plane(&scoped, &cut_plane, scope));
+        prop_assert_eq!(saved.0.elements(), saved.1.elements());
+        let opts = SplitOptions::default();
+        if polygon {
+            let a = cut_by_polygon_keeping(&mut whole, &corners, &opts, &[], CutScope::whole());
+            let b = cut_by_polygon_keeping(&mut scoped, &corners, &opts, &[], scope);
+            prop_assert_eq!(a.map(|r| r.cut), b.map(|r| r.cut));
+        } else {
+            let a = cut_by_plane_keeping(&mut whole, &plane, &opts, &[], CutScope::whole());
+            let b = cut_by_plane_keeping(&mut scoped, &plane, &opts, &[], scope);
+            prop_assert_eq!(a, b);
+        }
+        prop_assert!(whole == scoped);
+    }
+}
+
+/// A simulation's cut looks only at the elements its pattern lists near
+/// the plane: it makes the same mesh as a cut over the whole mesh, cut
+/// after cut (a blade, a plane, a blade across both).
+#[test]
+fn a_simulation_cut_over_its_scope_equals_a_cut_over_the_whole_mesh() {
+    let mut mesh = box_tet([0.0; 3], [2.0, 1.0, 1.0], [12, 6, 6]).unwrap();
+    let params = SimulationParams { min_part: 0.0, ..Default::default() };
+    let opts = params.cut;
+    let mut sim = Simulation::new(mesh.clone(), params).unwrap();
+    sim.step().unwrap();
+    let blade = |x: f64, tilt: f64| [[x, -0.1, 0.2], [x + tilt, 0.6, 0.2], [x + tilt, 0.6, 0.8], [x, -0.1, 0.8]];
+    for (i, polygon) in [blade(0.53, 0.1), blade(1.21, -0.05)].iter().enumerate() {
+        sim.cut_polygon(polygon).unwrap();
+        cut_by_polygon(&mut mesh, polygon, &opts).unwrap();
+        assert_eq!(sim.cut_retries(), 0, "no element kept whole on a retry");
+        assert!(sim.mesh() == &mesh, "blade {i}: the meshes differ");
+        let plane = Plane { point: [0.9 + 0.2 * i as f64, 0.5, 0.5], normal: [1.0, 0.3, -0.2] };
+        sim.cut_plane(&plane).unwrap();
+        cut_by_plane(&mut mesh, &plane, &opts).unwrap();
+        assert!(sim.mesh() == &mesh, "plane {i}: the meshes differ");
+        sim.step().unwrap();
     }
 }
 

@@ -5,8 +5,8 @@
 
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
-    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, open_pinched_nodes, pinched_nodes,
-    polygon_plane, CutReport, NodeOrigins, PolygonCutReport, Rollback, SplitOptions,
+    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, cut_reach, momenta, open_pinched_nodes,
+    pinched_nodes, polygon_plane, CutReport, CutScope, NodeOrigins, PolygonCutReport, Rollback, SplitOptions,
 };
 use crate::Error;
 
@@ -22,8 +22,8 @@ impl Simulation {
     /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
         let opts = self.cut_options();
-        let cut = |mesh: &mut PolyMesh, keep: &[u32]| -> Result<PolygonCutReport, Error> {
-            let cut = cut_by_plane_keeping(mesh, plane, &opts, keep)?;
+        let cut = |mesh: &mut PolyMesh, keep: &[u32], scope: CutScope| -> Result<PolygonCutReport, Error> {
+            let cut = cut_by_plane_keeping(mesh, plane, &opts, keep, scope)?;
             Ok(PolygonCutReport { cut, pocket: None })
         };
         self.cut(plane, cut).map(|report| report.cut)
@@ -36,7 +36,7 @@ impl Simulation {
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
         let plane = polygon_plane(polygon)?;
         let opts = self.cut_options();
-        self.cut(&plane, |mesh, keep| Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep)?))
+        self.cut(&plane, |mesh, keep, scope| Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep, scope)?))
     }
 
     /// The split options of a cut: the parameters' with their
@@ -47,8 +47,32 @@ impl Simulation {
         SplitOptions { min_diameter: opts.min_diameter.max(self.part_floor), ..opts }
     }
 
+    /// The elements a cut along `plane` must look at (see [`CutScope`]):
+    /// for the nodal families, every element the pattern lists at a node
+    /// within [`cut_reach`] of the plane, in increasing order; `None` (the
+    /// whole mesh) for the discontinuous Galerkin family, whose pattern's
+    /// blocks are not nodes, or a plane that is not a number.
+    fn cut_scope(&mut self, plane: &Plane) -> Option<Vec<u32>> {
+        let Model::Nodal(_) = &self.elements else { return None };
+        let mesh = &self.mesh;
+        let max_diameter = *self
+            .max_diameter
+            .get_or_insert_with(|| (0..mesh.elements.len()).map(|e| mesh.element_diameter(e)).fold(0.0, f64::max));
+        let reach = cut_reach(mesh, max_diameter);
+        let dist = plane.distances(&mesh.nodes);
+        if dist.iter().any(|d| d.is_nan()) || self.pattern.num_blocks != dist.len() {
+            return None;
+        }
+        let mut listed: Vec<u32> =
+            (0..dist.len()).filter(|&v| dist[v].abs() <= reach).flat_map(|v| self.pattern.elements_at(v)).collect();
+        listed.sort_unstable();
+        listed.dedup();
+        Some(listed)
+    }
+
     /// Runs `cut` (a cut along `plane`, leaving the elements it is given
-    /// whole) on the mesh in place and brings everything else up to date.
+    /// whole, looking at the elements in scope) on the mesh in place and
+    /// brings everything else up to date.
     /// When the element store finds an element the cut made or changed
     /// unhealthy (see [`crate::store::HealthFloors`]), the cut is undone
     /// and run again with the element it came from kept whole, up to
@@ -56,15 +80,18 @@ impl Simulation {
     fn cut(
         &mut self,
         plane: &Plane,
-        cut: impl Fn(&mut PolyMesh, &[u32]) -> Result<PolygonCutReport, Error>,
+        cut: impl Fn(&mut PolyMesh, &[u32], CutScope) -> Result<PolygonCutReport, Error>,
     ) -> Result<PolygonCutReport, Error> {
         let t = std::time::Instant::now();
         let rebuild = |t: &PhaseTimings| t.basis + t.assembly + t.solve;
         let before = rebuild(&self.timings);
         let mut keep_whole: Vec<u32> = Vec::new();
+        // (every attempt starts from the same mesh: the scope holds for all)
+        let listed = self.cut_scope(plane);
         let result = loop {
-            let rollback = Rollback::around_plane(&self.mesh, plane);
-            let outcome = match cut(&mut self.mesh, &keep_whole) {
+            let scope = listed.as_deref().map_or(CutScope::whole(), |l| CutScope::listed(&self.mesh, l));
+            let rollback = Rollback::around_plane(&self.mesh, plane, scope);
+            let outcome = match cut(&mut self.mesh, &keep_whole, scope) {
                 Err(error) => Err((None, error)),
                 Ok(report) => match self.apply_cut(&report) {
                     Ok(()) => Ok(report),
@@ -133,6 +160,9 @@ impl Simulation {
         let t = std::time::Instant::now();
         let changes = store.update(mesh, &self.params.material, &self.params.basis, touched, &parents)?;
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
+        if let Some(max) = &mut self.max_diameter {
+            *max = touched.iter().map(|&e| mesh.element_diameter(e as usize)).fold(*max, f64::max);
+        }
         // the nodes whose mass changes: those of the touched elements,
         // before and after
         let mut changed_nodes = cut.old_nodes.clone();

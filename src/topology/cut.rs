@@ -10,6 +10,7 @@
 //! Positions are in the mesh's rest (material) frame.
 
 use super::split::{on_plane_band, split, SplitError, SplitOptions, SplitReport};
+use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{Face, PolyMesh};
 
@@ -68,8 +69,8 @@ impl CutReport {
 /// taken to lie on it by `split`) or shared with an element `split` split or
 /// kept whole. Every element holding a node that elements on both sides use
 /// is among them: such a node lies on the plane, or on an element the plane
-/// crossed.
-pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, split: &SplitReport) -> Vec<u32> {
+/// crossed. Only the elements in `scope` are looked at.
+pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, split: &SplitReport, scope: CutScope) -> Vec<u32> {
     let band = on_plane_band(mesh);
     let mut marked: Vec<bool> = plane.distances(&mesh.nodes).iter().map(|d| d.abs() <= band).collect();
     split.on_plane.iter().for_each(|&v| marked[v as usize] = true);
@@ -77,8 +78,10 @@ pub(crate) fn cut_region(mesh: &PolyMesh, plane: &Plane, split: &SplitReport) ->
     for e in crossed {
         mesh.elements[e as usize].nodes.iter().for_each(|&v| marked[v as usize] = true);
     }
-    (0..mesh.elements.len() as u32)
-        .filter(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| marked[v as usize]))
+    scope
+        .elements(mesh)
+        .filter(|&e| mesh.elements[e].nodes.iter().any(|&v| marked[v as usize]))
+        .map(|e| e as u32)
         .collect()
 }
 
@@ -110,22 +113,23 @@ pub(crate) fn element_sides(mesh: &PolyMesh, plane: &Plane, region: &[u32], spli
 
 /// Splits along `plane` and separates the two sides (see module docs).
 pub fn cut_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<CutReport, SplitError> {
-    cut_by_plane_keeping(mesh, plane, opts, &[])
+    cut_by_plane_keeping(mesh, plane, opts, &[], CutScope::whole())
 }
 
 /// [`cut_by_plane`] leaving the sorted `keep_whole` elements as they are:
 /// not split and given no new node (the cut goes around them; the
 /// simulation retries a cut so when the element store finds a part
-/// unhealthy).
+/// unhealthy), looking only at the elements in `scope`.
 pub fn cut_by_plane_keeping(
     mesh: &mut PolyMesh,
     plane: &Plane,
     opts: &SplitOptions,
     keep_whole: &[u32],
+    scope: CutScope,
 ) -> Result<CutReport, SplitError> {
     let nodes_before = mesh.nodes.len();
-    let split = split(mesh, plane, None, keep_whole, opts)?;
-    let region = cut_region(mesh, plane, &split);
+    let split = split(mesh, plane, None, keep_whole, opts, scope)?;
+    let region = cut_region(mesh, plane, &split, scope);
     let side = element_sides(mesh, plane, &region, &split);
     let (duplicated, mut touched) = separate(mesh, &region, &side, |_| true, |_| true);
     touched.extend(split.split_elements.iter().flat_map(|&(a, b)| [a, b]));

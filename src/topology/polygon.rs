@@ -16,9 +16,11 @@
 use std::collections::HashMap;
 
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
+use rayon::prelude::*;
 
 use super::cut::{cut_region, element_sides, separate, CutReport};
 use super::split::{on_plane_band, plane_basis, split, NewNode, SplitError, SplitOptions, ON_PLANE};
+use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
 
@@ -115,17 +117,19 @@ pub fn cut_by_polygon(
     polygon: &[[f64; 3]],
     opts: &SplitOptions,
 ) -> Result<PolygonCutReport, SplitError> {
-    cut_by_polygon_keeping(mesh, polygon, opts, &[])
+    cut_by_polygon_keeping(mesh, polygon, opts, &[], CutScope::whole())
 }
 
 /// [`cut_by_polygon`] leaving the sorted `keep_whole` elements as they
 /// are: not split, given no new node, their faces in the plane not split
-/// along the polygon's edges nor given a pocket.
+/// along the polygon's edges nor given a pocket; only the elements in
+/// `scope` are looked at.
 pub fn cut_by_polygon_keeping(
     mesh: &mut PolyMesh,
     polygon: &[[f64; 3]],
     opts: &SplitOptions,
     keep_whole: &[u32],
+    scope: CutScope,
 ) -> Result<PolygonCutReport, SplitError> {
     // the polygon's plane and its counter-clockwise 2-D outline
     let plane = polygon_plane(polygon)?;
@@ -143,7 +147,10 @@ pub fn cut_by_polygon_keeping(
 
     // 1. split the crossed elements whose section overlaps the polygon
     let node_dist = plane.distances(&mesh.nodes);
-    let chosen: Vec<u32> = (0..mesh.elements.len())
+    // (each element's test is independent: run in parallel)
+    let candidates: Vec<usize> = scope.elements(mesh).collect();
+    let chosen: Vec<u32> = candidates
+        .into_par_iter()
         .filter(|&e| {
             let el = &mesh.elements[e];
             let d = el.nodes.iter().map(|&v| node_dist[v as usize]);
@@ -172,7 +179,7 @@ pub fn cut_by_polygon_keeping(
         .map(|e| e as u32)
         .collect();
     let nodes_before = mesh.nodes.len();
-    let split = split(mesh, &plane, Some(&chosen), keep_whole, opts)?;
+    let split = split(mesh, &plane, Some(&chosen), keep_whole, opts, scope)?;
     let protected = |e: &u32| keep_whole.binary_search(e).is_ok();
     let mut new_nodes = split.new_nodes.clone();
 
@@ -183,7 +190,7 @@ pub fn cut_by_polygon_keeping(
     // cut around: its faces towards the other side take the place of the
     // cap it did not get
     let band = on_plane_band(mesh);
-    let region = cut_region(mesh, &plane, &split);
+    let region = cut_region(mesh, &plane, &split, scope);
     let mut region_faces: Vec<u32> =
         region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
     region_faces.sort_unstable();

@@ -11,6 +11,7 @@
 //! proportional to the region it touched.
 
 use super::split::on_plane_band;
+use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{Element, Face, FaceRef, PolyMesh};
 
@@ -58,12 +59,14 @@ impl<T: Copy> Flat<T> {
 
 impl Rollback {
     /// Saves what a cut along `plane` may change: the elements sharing a
-    /// node with an element that reaches the plane, and their faces.
-    pub fn around_plane(mesh: &PolyMesh, plane: &Plane) -> Self {
+    /// node with an element that reaches the plane, and their faces; only
+    /// the elements in `scope` are looked at (they hold all of those).
+    pub fn around_plane(mesh: &PolyMesh, plane: &Plane, scope: CutScope) -> Self {
         let band = on_plane_band(mesh);
         let dist = plane.distances(&mesh.nodes);
         let mut near = vec![false; mesh.nodes.len()];
-        for el in &mesh.elements {
+        for e in scope.elements(mesh) {
+            let el = &mesh.elements[e];
             let (lo, hi) = el.nodes.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
                 (lo.min(dist[v as usize]), hi.max(dist[v as usize]))
             });
@@ -72,7 +75,7 @@ impl Rollback {
                 el.nodes.iter().for_each(|&v| near[v as usize] = true);
             }
         }
-        Self::save(mesh, &near, Vec::new())
+        Self::save(mesh, scope.elements(mesh), &near, Vec::new())
     }
 
     /// Saves what a change that moves `nodes` and rewires the elements
@@ -81,7 +84,8 @@ impl Rollback {
     pub fn around_nodes(mesh: &PolyMesh, nodes: &[u32]) -> Self {
         let mut near = vec![false; mesh.nodes.len()];
         nodes.iter().for_each(|&v| near[v as usize] = true);
-        Self::save(mesh, &near, nodes.iter().map(|&v| (v, mesh.nodes[v as usize])).collect())
+        let positions = nodes.iter().map(|&v| (v, mesh.nodes[v as usize])).collect();
+        Self::save(mesh, 0..mesh.elements.len(), &near, positions)
     }
 
     /// The ids of the saved elements, in increasing order.
@@ -89,9 +93,14 @@ impl Rollback {
         &self.elements_saved
     }
 
-    /// Saves the elements holding a `near` node, their faces, and
-    /// `positions`.
-    fn save(mesh: &PolyMesh, near: &[bool], positions: Vec<(u32, [f64; 3])>) -> Self {
+    /// Saves the elements among `candidates` (in increasing order) holding
+    /// a `near` node, their faces, and `positions`.
+    fn save(
+        mesh: &PolyMesh,
+        candidates: impl Iterator<Item = usize>,
+        near: &[bool],
+        positions: Vec<(u32, [f64; 3])>,
+    ) -> Self {
         let mut saved = Rollback {
             nodes: mesh.nodes.len(),
             faces: mesh.faces.len(),
@@ -104,21 +113,21 @@ impl Rollback {
             face_triangles: Flat::new(),
             positions,
         };
-        let mut face_saved = vec![false; mesh.faces.len()];
-        for (e, el) in mesh.elements.iter().enumerate() {
+        for e in candidates {
+            let el = &mesh.elements[e];
             if el.nodes.iter().any(|&v| near[v as usize]) {
                 saved.elements_saved.push(e as u32);
                 saved.element_faces.push(&el.faces);
                 saved.element_nodes.push(&el.nodes);
-                el.faces.iter().for_each(|r| face_saved[r.face as usize] = true);
+                saved.faces_saved.extend(el.faces.iter().map(|r| r.face));
             }
         }
-        for (f, face) in mesh.faces.iter().enumerate() {
-            if face_saved[f] {
-                saved.faces_saved.push(f as u32);
-                saved.face_vertices.push(&face.vertices);
-                saved.face_triangles.push(&face.triangles);
-            }
+        saved.faces_saved.sort_unstable();
+        saved.faces_saved.dedup();
+        for &f in &saved.faces_saved {
+            let face = &mesh.faces[f as usize];
+            saved.face_vertices.push(&face.vertices);
+            saved.face_triangles.push(&face.triangles);
         }
         saved
     }

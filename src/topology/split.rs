@@ -34,8 +34,10 @@
 use std::collections::HashMap;
 
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
+use rayon::prelude::*;
 use thiserror::Error;
 
+use super::CutScope;
 use crate::mesh::{diameter, fold_depth, quality, Face, FaceRef, Plane, PolyMesh};
 
 /// Tolerances of a split.
@@ -165,7 +167,7 @@ pub enum SplitError {
 
 /// Splits every element that `plane` crosses (see the module docs).
 pub fn split_by_plane(mesh: &mut PolyMesh, plane: &Plane, opts: &SplitOptions) -> Result<SplitReport, SplitError> {
-    split(mesh, plane, None, &[], opts)
+    split(mesh, plane, None, &[], opts, CutScope::whole())
 }
 
 /// Splits those of `elements` that `plane` crosses, and repairs the
@@ -176,7 +178,7 @@ pub fn split_elements_by_plane(
     elements: &[u32],
     opts: &SplitOptions,
 ) -> Result<SplitReport, SplitError> {
-    split(mesh, plane, Some(elements), &[], opts)
+    split(mesh, plane, Some(elements), &[], opts, CutScope::whole())
 }
 
 /// How `plane` would split every element of `mesh` it crosses, without
@@ -186,7 +188,7 @@ pub(crate) fn classify_split(
     plane: &Plane,
     opts: &SplitOptions,
 ) -> Result<Classification, SplitError> {
-    classify(mesh, plane, None, &[], opts)
+    classify(mesh, plane, None, &[], opts, CutScope::whole())
 }
 
 /// How a plane meets a mesh, decided before anything changes.
@@ -233,6 +235,7 @@ pub(crate) fn classify(
     only: Option<&[u32]>,
     keep_whole: &[u32],
     opts: &SplitOptions,
+    scope: CutScope,
 ) -> Result<Classification, SplitError> {
     let len = norm(plane.normal);
     if !(len > 0.0) || !len.is_finite() || !plane.point.iter().all(|x| x.is_finite()) {
@@ -245,7 +248,8 @@ pub(crate) fn classify(
             *c = true;
         }
     }
-    let straddling: Vec<usize> = (0..mesh.elements.len())
+    let straddling: Vec<usize> = scope
+        .elements(mesh)
         .filter(|&e| {
             let d = mesh.elements[e].nodes.iter().map(|&v| dist[v as usize]);
             d.clone().any(|x| x > 0.0) && d.clone().any(|x| x < 0.0)
@@ -285,9 +289,12 @@ pub(crate) fn classify(
     // every element with nodes on both sides is split, or kept whole: when
     // not chosen, protected or unhealthy once split
     let both: Vec<usize> = straddling.iter().copied().filter(|&e| has_both(e)).collect();
+    // (the trial splits are independent: run in parallel)
     let mut keep: HashMap<usize, bool> = both
-        .iter()
+        .par_iter()
         .map(|&e| (e, !chosen[e] || protected(e) || !split_is_healthy(mesh, e, &dist, &side, plane, opts)))
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect();
     // the elements on each crossed edge (every element holding an edge with
     // ends on opposite sides has nodes on both sides)
@@ -577,16 +584,18 @@ fn cap_pieces(points: &[[f64; 3]], plane: &Plane) -> Vec<Vec<usize>> {
 
 /// Splits `only` those elements (all if `None`) that `plane` crosses,
 /// leaving the sorted `keep_whole` elements as they are: not split and
-/// given no new node (the elements on their crossed edges stay whole too).
+/// given no new node (the elements on their crossed edges stay whole too);
+/// only the elements in `scope` are looked at.
 pub(crate) fn split(
     mesh: &mut PolyMesh,
     plane: &Plane,
     only: Option<&[u32]>,
     keep_whole: &[u32],
     opts: &SplitOptions,
+    scope: CutScope,
 ) -> Result<SplitReport, SplitError> {
     let Classification { dist, side, straddling, crossed, kept_whole, on_plane } =
-        classify(mesh, plane, only, keep_whole, opts)?;
+        classify(mesh, plane, only, keep_whole, opts, scope)?;
     let mut report =
         SplitReport { kept_whole: kept_whole.iter().map(|&e| e as u32).collect(), on_plane, ..Default::default() };
     if crossed.is_empty() {
