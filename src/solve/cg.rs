@@ -74,20 +74,32 @@ impl BlockStructure {
     /// block column that is not a repeated 3x3 block column.
     pub fn new(pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<Self, SolveError> {
         let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-        let mut out = BlockStructure { ptr: vec![0], ..Default::default() };
-        for j in 0..pattern.ncols() / 3 {
-            let rows = &ri[cp[3 * j]..cp[3 * j + 1]];
+        let blocks = pattern.ncols() / 3;
+        let first_rows = |j: usize| &ri[cp[3 * j]..cp[3 * j + 1]];
+        // (the columns are checked and listed in parallel: a cut's new
+        // pattern is analysed before the next step)
+        let irregular = (0..blocks).into_par_iter().find_first(|&j| {
+            let rows = first_rows(j);
             let regular = rows.len() % 3 == 0
                 && rows.chunks(3).all(|r| r[0] % 3 == 0 && r[1] == r[0] + 1 && r[2] == r[0] + 2)
                 && (1..3).all(|c| ri[cp[3 * j + c]..cp[3 * j + c + 1]] == *rows);
-            if !regular {
-                return Err(SolveError::Analysis(format!("block column {j} is not a repeated 3x3 block column")));
-            }
-            out.start.push(cp[3 * j]);
-            out.rows.extend(rows.chunks(3).map(|r| (r[0] / 3) as u32));
-            out.ptr.push(u32::try_from(out.rows.len()).map_err(|_| SolveError::Analysis("over 2^32 blocks".into()))?);
+            !regular
+        });
+        if let Some(j) = irregular {
+            return Err(SolveError::Analysis(format!("block column {j} is not a repeated 3x3 block column")));
         }
-        Ok(out)
+        let mut ptr = Vec::with_capacity(blocks + 1);
+        ptr.push(0u32);
+        for j in 0..blocks {
+            let end = *ptr.last().expect("starts with 0") as usize + first_rows(j).len() / 3;
+            ptr.push(u32::try_from(end).map_err(|_| SolveError::Analysis("over 2^32 blocks".into()))?);
+        }
+        let rows = (0..blocks)
+            .into_par_iter()
+            .flat_map_iter(|j| first_rows(j).iter().step_by(3).map(|&r| (r / 3) as u32))
+            .collect();
+        let start = (0..blocks).map(|j| cp[3 * j]).collect();
+        Ok(BlockStructure { ptr, rows, start })
     }
 
     /// The structure as the product kernel takes it.
@@ -355,25 +367,24 @@ fn invert3(m: [f64; 9]) -> [f64; 9] {
 impl LinearSolver for ConjugateGradient {
     fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError> {
         let n = pattern.nrows();
-        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-        self.diagonal_blocks = (0..n / 3)
+        let blocks = BlockStructure::new(pattern)?;
+        // the diagonal block's nine slots from its position among the block
+        // rows (one search per block; the first block without one is named)
+        let slots: Vec<Option<[usize; 9]>> = (0..n / 3)
+            .into_par_iter()
             .map(|j| {
-                let mut slots = [0usize; 9];
-                for c in 0..3 {
-                    let col = 3 * j + c;
-                    let rows = &ri[cp[col]..cp[col + 1]];
-                    for r in 0..3 {
-                        let p = rows
-                            .binary_search(&(3 * j + r))
-                            .map_err(|_| SolveError::Analysis(format!("block {j} has no diagonal")))?;
-                        slots[3 * r + c] = cp[col] + p;
-                    }
-                }
-                Ok(slots)
+                let rows = &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+                let p = rows.binary_search(&(j as u32)).ok()?;
+                let stride = 3 * rows.len();
+                Some(std::array::from_fn(|k| blocks.start[j] + (k % 3) * stride + 3 * p + k / 3))
             })
-            .collect::<Result<_, SolveError>>()?;
+            .collect();
+        if let Some(j) = slots.iter().position(Option::is_none) {
+            return Err(SolveError::Analysis(format!("block {j} has no diagonal")));
+        }
+        self.diagonal_blocks = slots.into_iter().flatten().collect();
         self.inverse_blocks = vec![[0.0; 9]; n / 3];
-        self.blocks = BlockStructure::new(pattern)?;
+        self.blocks = blocks;
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
             *v = vec![0.0; n];
         }
