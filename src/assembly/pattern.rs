@@ -145,6 +145,9 @@ impl Buffers {
     }
 }
 
+/// Columns per parallel task of [`SparsePattern::lay_out`].
+const LAY_OUT_RUN: usize = 256;
+
 /// A raw pointer to the values, shared by the node tasks of one assembly.
 #[derive(Clone, Copy)]
 struct SharedValues(*mut f64);
@@ -266,6 +269,12 @@ impl SparsePattern {
         self.spare = Buffers { col_ptr, row_idx, incidences: old.incidences, slots: old.slots };
     }
 
+    /// The ids of the entries (elements) coupling block `j`, in the
+    /// pattern's fixed order (none for a block past the pattern).
+    pub fn elements_at(&self, j: usize) -> impl Iterator<Item = u32> + '_ {
+        self.column_incidences(j).iter().map(|inc| inc.id)
+    }
+
     /// The incidences of node `j` (none for a node past the pattern).
     fn column_incidences(&self, j: usize) -> &[Incidence] {
         match (self.offsets.get(j), self.offsets.get(j + 1)) {
@@ -275,7 +284,10 @@ impl SparsePattern {
     }
 
     /// Lays out the compressed columns of `columns` into `buffers`, copying
-    /// the rows and slots of kept columns.
+    /// the rows and slots of kept columns: the sizes first, then every
+    /// column written into its own stretch of the arrays, in parallel over
+    /// runs of [`LAY_OUT_RUN`] columns (the arrays are the same whatever
+    /// the thread count).
     fn lay_out(store: &impl Couplings, columns: Vec<Column>, buffers: Buffers) -> Self {
         let num_blocks = columns.len();
         // block rows of every recomputed column: union of its elements' nodes
@@ -296,53 +308,97 @@ impl SparsePattern {
                 r
             })
             .collect();
+        // per column: scalar stride, incidences and slots, and where each
+        // starts in its array
+        let (mut col_stride, mut diagonal) = (Vec::with_capacity(num_blocks), Vec::with_capacity(num_blocks));
+        let mut starts = Vec::with_capacity(num_blocks + 1);
+        let mut at = [0usize; 3];
+        for (j, col) in columns.iter().enumerate() {
+            starts.push(at);
+            let (stride, incidences) = match col {
+                Column::Kept(old) => {
+                    diagonal.push(old.diagonal[j]);
+                    (old.col_stride[j], old.column_incidences(j))
+                }
+                Column::New(incidences) => {
+                    let p = rows[j].binary_search(&(j as u32)).expect("every column holds its diagonal");
+                    diagonal.push(u32::try_from(3 * p).expect("fewer than 2^32 entries per column"));
+                    (3 * rows[j].len(), &incidences[..])
+                }
+            };
+            col_stride.push(stride);
+            at[0] += 3 * stride;
+            at[1] += incidences.len();
+            at[2] += incidences.iter().map(|inc| inc.size as usize).sum::<usize>();
+        }
+        starts.push(at);
         let n = 3 * num_blocks;
         let Buffers { mut col_ptr, mut row_idx, mut incidences, mut slots } = buffers;
-        col_ptr.reserve(n + 1);
-        let mut col_stride = Vec::with_capacity(num_blocks);
-        let mut diagonal = Vec::with_capacity(num_blocks);
-        let mut offsets = Vec::with_capacity(num_blocks + 1);
-        col_ptr.push(0usize);
-        offsets.push(0u32);
-        for (j, col) in columns.into_iter().enumerate() {
-            let start = row_idx.len();
-            match col {
-                Column::Kept(old) => {
-                    let old_col = old.symbolic.col_ptr();
-                    let (a, b) = (old_col[3 * j], old_col[3 * j + 3]);
-                    let stride = old.col_stride[j];
-                    row_idx.extend_from_slice(&old.symbolic.row_idx()[a..b]);
-                    col_ptr.extend([start + stride, start + 2 * stride, start + 3 * stride]);
-                    col_stride.push(stride);
-                    diagonal.push(old.diagonal[j]);
-                    for inc in old.column_incidences(j) {
-                        let from = inc.slots as usize;
-                        let (batch, element) = store.locate(inc.id);
-                        incidences.push(Incidence { batch, element, slots: slots.len() as u32, ..*inc });
-                        slots.extend_from_slice(&old.slots[from..from + inc.size as usize]);
+        col_ptr.extend((0..n).map(|c| starts[c / 3][0] + (c % 3) * col_stride[c / 3]));
+        col_ptr.push(at[0]);
+        let offsets: Vec<u32> =
+            starts.iter().map(|s| u32::try_from(s[1]).expect("fewer than 2^32 incidences")).collect();
+        let unset = Incidence { batch: 0, element: 0, id: 0, local: 0, size: 0, slots: 0 };
+        row_idx.resize(at[0], 0);
+        incidences.resize(at[1], unset);
+        slots.resize(at[2], 0);
+        // the arrays cut into the stretches of runs of columns
+        let mut runs = Vec::with_capacity(num_blocks.div_ceil(LAY_OUT_RUN));
+        let (mut row_rest, mut inc_rest, mut slot_rest) = (&mut row_idx[..], &mut incidences[..], &mut slots[..]);
+        for first in (0..num_blocks).step_by(LAY_OUT_RUN) {
+            let last = (first + LAY_OUT_RUN).min(num_blocks);
+            let len = |k: usize| starts[last][k] - starts[first][k];
+            let (r, rr) = std::mem::take(&mut row_rest).split_at_mut(len(0));
+            let (i, ir) = std::mem::take(&mut inc_rest).split_at_mut(len(1));
+            let (s, sr) = std::mem::take(&mut slot_rest).split_at_mut(len(2));
+            (row_rest, inc_rest, slot_rest) = (rr, ir, sr);
+            runs.push((first..last, r, i, s));
+        }
+        runs.into_par_iter().for_each(|(range, row_out, inc_out, slot_out)| {
+            let base = starts[range.start];
+            for j in range {
+                let [e0, i0, s0] = std::array::from_fn(|k| starts[j][k] - base[k]);
+                let [e1, i1, s1] = std::array::from_fn(|k| starts[j + 1][k] - base[k]);
+                let (row_out, inc_out, slot_out) = (&mut row_out[e0..e1], &mut inc_out[i0..i1], &mut slot_out[s0..s1]);
+                let mut slot = starts[j][2];
+                match &columns[j] {
+                    Column::Kept(old) => {
+                        let old_col = old.symbolic.col_ptr();
+                        row_out.copy_from_slice(&old.symbolic.row_idx()[old_col[3 * j]..old_col[3 * j + 3]]);
+                        let mut written = 0;
+                        for (out, inc) in inc_out.iter_mut().zip(old.column_incidences(j)) {
+                            let (from, size) = (inc.slots as usize, inc.size as usize);
+                            let (batch, element) = store.locate(inc.id);
+                            *out = Incidence { batch, element, slots: slot as u32, ..*inc };
+                            slot_out[written..written + size].copy_from_slice(&old.slots[from..from + size]);
+                            (written, slot) = (written + size, slot + size);
+                        }
                     }
-                }
-                Column::New(new_incidences) => {
-                    let r = &rows[j];
-                    row_idx.extend(r.iter().flat_map(|&i| [3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]));
-                    row_idx.extend_from_within(start..);
-                    row_idx.extend_from_within(start..start + 3 * r.len());
-                    col_ptr.extend([start + 3 * r.len(), start + 6 * r.len(), start + 9 * r.len()]);
-                    col_stride.push(3 * r.len());
-                    let position = |i: u32| -> u32 {
-                        let p = r.binary_search(&i).expect("pattern holds every element pair");
-                        u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
-                    };
-                    diagonal.push(position(j as u32));
-                    for inc in &new_incidences {
-                        incidences.push(Incidence { slots: slots.len() as u32, ..*inc });
-                        let nodes = store.blocks(inc.batch as usize, inc.element as usize);
-                        slots.extend(nodes.iter().map(|&a| position(a)));
+                    Column::New(new_incidences) => {
+                        let r = &rows[j];
+                        let third = 3 * r.len();
+                        for (out, &i) in row_out[..third].chunks_exact_mut(3).zip(r) {
+                            out.copy_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
+                        }
+                        row_out.copy_within(..third, third);
+                        row_out.copy_within(..third, 2 * third);
+                        let position = |i: u32| -> u32 {
+                            let p = r.binary_search(&i).expect("pattern holds every element pair");
+                            u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
+                        };
+                        let mut written = 0;
+                        for (out, inc) in inc_out.iter_mut().zip(new_incidences) {
+                            *out = Incidence { slots: slot as u32, ..*inc };
+                            let nodes = store.blocks(inc.batch as usize, inc.element as usize);
+                            for (s, &a) in slot_out[written..written + nodes.len()].iter_mut().zip(nodes) {
+                                *s = position(a);
+                            }
+                            (written, slot) = (written + nodes.len(), slot + nodes.len());
+                        }
                     }
                 }
             }
-            offsets.push(u32::try_from(incidences.len()).expect("fewer than 2^32 incidences"));
-        }
+        });
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         SparsePattern {
             num_blocks,
