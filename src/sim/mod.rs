@@ -108,8 +108,11 @@ pub struct Simulation {
     contacts: Option<(PointMap, Vec<f64>)>,
     /// An embedded surface and its map from the blocks.
     embedded: Option<(EmbeddedSurface, PointMap)>,
-    /// Outward triangles of the boundary surface (node ids), per topology.
-    surface: Vec<[u32; 3]>,
+    /// Outward triangles of the boundary surface (node ids), per topology:
+    /// built when first asked for (a cut leaves it empty, so that making
+    /// the system ready to step never waits for a pass over the mesh).
+    #[serde(skip)]
+    surface: std::sync::OnceLock<Vec<[u32; 3]>>,
     /// The step's system, solver and buffers (empty after
     /// deserialization until the first step).
     #[serde(skip)]
@@ -221,7 +224,7 @@ impl Simulation {
             (Model::Nodal(NodalElements { store, corotation }), pattern, masses.clone(), masses)
         };
         let system = StepSystem::new(params.solver, &pattern, params.tolerance, params.max_iterations);
-        let (state, surface) = (NodeState::at_rest(rest(&mesh, &elements)), mesh.boundary_triangles());
+        let state = NodeState::at_rest(rest(&mesh, &elements));
         let part_floor = params.min_part * mesh.median_element_diameter();
         let mut sim = Simulation {
             mesh,
@@ -236,7 +239,7 @@ impl Simulation {
             nodes: NodeView::default(),
             contacts: None,
             embedded: None,
-            surface,
+            surface: std::sync::OnceLock::new(),
             system,
             statics: None,
             steps: 0,
@@ -521,9 +524,10 @@ impl Simulation {
     }
 
     /// The boundary surface: outward triangles over node ids (index into
-    /// [`Simulation::positions`]), rebuilt when the topology changes.
+    /// [`Simulation::positions`]), built on the first call after a
+    /// topology change.
     pub fn boundary_triangles(&self) -> &[[u32; 3]] {
-        &self.surface
+        self.surface.get_or_init(|| self.mesh.boundary_triangles())
     }
 
     /// The plane colliders, in the order they were added.

@@ -1,7 +1,7 @@
 //! Topology changes applied to a running simulation, in one place: a cut
 //! changes the mesh, then everything built on it follows in a fixed order
 //! (element data, node state, sparse pattern, masses, momenta, rotations,
-//! the solvers and the boundary surface).
+//! the solvers; the boundary surface is rebuilt when next asked for).
 
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
@@ -136,8 +136,9 @@ impl Simulation {
     /// new nodes ([`NodeOrigins`]), updates the pattern's columns of their
     /// nodes and the masses, restores the momenta of the nodes whose masses
     /// changed, and brings the rotations (untouched elements keep theirs,
-    /// new ones get theirs), the solvers and the boundary surface up to
-    /// date. Nothing but the mesh has changed when it fails.
+    /// new ones get theirs) and the solvers up to date, and leaves the
+    /// boundary surface to be rebuilt when next asked for. Nothing but the
+    /// mesh has changed when it fails.
     pub(super) fn apply_cut(&mut self, report: &PolygonCutReport) -> Result<(), Error> {
         let (mesh, cut) = (&self.mesh, &report.cut);
         let touched = &cut.touched;
@@ -188,7 +189,7 @@ impl Simulation {
         let p = &self.params;
         self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
-        self.surface = mesh.boundary_triangles();
+        self.surface = std::sync::OnceLock::new();
         self.refresh_body_loads();
         self.refresh_embedding()
     }
@@ -258,7 +259,7 @@ impl Simulation {
         let t = std::time::Instant::now();
         self.pattern = crate::assembly::SparsePattern::build(blocks, &**dg);
         self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
-        self.surface = mesh.boundary_triangles();
+        self.surface = std::sync::OnceLock::new();
         self.faces_integrated += changes.faces_integrated;
         // (the caller's rollback undoes the cut; the opened nodes first)
         self.refresh_dg_dependents().inspect_err(|_| {
