@@ -241,25 +241,29 @@ impl SparsePattern {
             }
         }
         added.sort_by_key(|&(v, inc)| (v, inc.id));
-        let mut added = added.into_iter().peekable();
-        let mut columns = Vec::with_capacity(num_blocks);
-        for (j, &is_dirty) in dirty.iter().enumerate() {
-            if !is_dirty && j < self.num_blocks {
-                columns.push(Column::Kept(self));
-                continue;
-            }
-            let old = self.column_incidences(j);
-            let mut incidences: Vec<Incidence> =
-                old.iter().filter(|inc| changed.binary_search(&inc.id).is_err()).copied().collect();
-            while let Some((_, inc)) = added.next_if(|&(v, _)| v as usize == j) {
-                incidences.push(inc);
-            }
-            // entries of other elements may have moved in their batch
-            for inc in &mut incidences {
-                (inc.batch, inc.element) = store.locate(inc.id);
-            }
-            columns.push(Column::New(incidences));
-        }
+        let last = changed.iter().max().map_or(0, |&e| e as usize + 1);
+        let mut is_changed = vec![false; last];
+        changed.iter().for_each(|&e| is_changed[e as usize] = true);
+        let was_changed = |e: u32| is_changed.get(e as usize).copied().unwrap_or(false);
+        // (the columns are independent: made in parallel, in order)
+        let this = &*self;
+        let columns: Vec<Column> = (0..num_blocks)
+            .into_par_iter()
+            .map(|j| {
+                if !dirty[j] && j < this.num_blocks {
+                    return Column::Kept(this);
+                }
+                let (lo, hi) =
+                    (added.partition_point(|a| (a.0 as usize) < j), added.partition_point(|a| a.0 as usize <= j));
+                let kept = this.column_incidences(j).iter().filter(|inc| !was_changed(inc.id)).copied();
+                let mut incidences: Vec<Incidence> = kept.chain(added[lo..hi].iter().map(|a| a.1)).collect();
+                // entries of other elements may have moved in their batch
+                for inc in &mut incidences {
+                    (inc.batch, inc.element) = store.locate(inc.id);
+                }
+                Column::New(incidences)
+            })
+            .collect();
         // room for what a cut adds, so the arrays are not regrown
         let room = |n: usize| n + n / 8;
         let buffers = spare.with_room(room(self.nnz()), room(self.incidences.len()), room(self.slots.len()));
@@ -315,21 +319,25 @@ impl SparsePattern {
         let mut at = [0usize; 3];
         for (j, col) in columns.iter().enumerate() {
             starts.push(at);
-            let (stride, incidences) = match col {
+            let (stride, incidences, slots) = match col {
                 Column::Kept(old) => {
                     diagonal.push(old.diagonal[j]);
-                    (old.col_stride[j], old.column_incidences(j))
+                    // (a column's slots lie together, in incidence order)
+                    let incidences = old.column_incidences(j);
+                    let slots = incidences.last().map_or(0, |l| (l.slots + l.size - incidences[0].slots) as usize);
+                    (old.col_stride[j], incidences.len(), slots)
                 }
                 Column::New(incidences) => {
                     let p = rows[j].binary_search(&(j as u32)).expect("every column holds its diagonal");
                     diagonal.push(u32::try_from(3 * p).expect("fewer than 2^32 entries per column"));
-                    (3 * rows[j].len(), &incidences[..])
+                    let slots = incidences.iter().map(|inc| inc.size as usize).sum();
+                    (3 * rows[j].len(), incidences.len(), slots)
                 }
             };
             col_stride.push(stride);
             at[0] += 3 * stride;
-            at[1] += incidences.len();
-            at[2] += incidences.iter().map(|inc| inc.size as usize).sum::<usize>();
+            at[1] += incidences;
+            at[2] += slots;
         }
         starts.push(at);
         let n = 3 * num_blocks;
