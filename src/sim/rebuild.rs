@@ -10,7 +10,7 @@ use crate::topology::{
 };
 use crate::Error;
 
-use super::{Model, Phase, PhaseTimings, Simulation, StepSystem, CUT_ATTEMPTS};
+use super::{Model, Phase, PhaseTimings, Simulation, CUT_ATTEMPTS};
 
 impl Simulation {
     /// Cuts the body along a whole plane given in the rest (material)
@@ -187,7 +187,7 @@ impl Simulation {
         let warp = self.params.corotated;
         nodal.corotation.apply_changes(store, &changes, &state.position, warp);
         let p = &self.params;
-        self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        self.system.renew(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
         self.surface = std::sync::OnceLock::new();
         self.refresh_body_loads();

@@ -84,6 +84,27 @@ impl StepSystem {
         }
     }
 
+    /// Makes this the system of a new topology's `pattern` (as
+    /// [`StepSystem::new`]), keeping the buffers' memory: after a cut the
+    /// next step writes into pages it already has.
+    pub fn renew(&mut self, kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) {
+        let n = 3 * pattern.num_blocks;
+        self.solver = make_solver(kind, n, tolerance, max_iterations);
+        (self.analysed, self.referenced) = (false, false);
+        // (every value is written by the next assembly, every entry of the
+        // vectors by the next step: only their lengths matter)
+        self.values.resize(pattern.nnz(), 0.0);
+        self.rhs.resize(n, 0.0);
+        self.velocity.resize(n, 0.0);
+        self.force.resize(pattern.num_blocks, [0.0; 3]);
+        self.constraints = Constraints::free(n);
+        for buffer in [&mut self.reference, &mut self.reference_rhs] {
+            buffer.clear();
+        }
+        self.frames.clear();
+        self.frame_sums.clear();
+    }
+
     /// Whether this system was made for `pattern` (a deserialized
     /// simulation's is empty).
     fn fits(&self, pattern: &SparsePattern) -> bool {
