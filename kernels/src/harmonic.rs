@@ -151,6 +151,49 @@ pub fn evaluate(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &m
     crate::lanes::dispatch(Evaluate { f, points, phi, grad, stack });
 }
 
+/// The weighted kernel column of the MFS fit for the centre `c` (scaled
+/// coordinates): `out_i = w_i (1 / |x_i - c|)` over the points given by
+/// coordinate (`coords[d][i]`), the same values as the plain loop of
+/// [`kernel_column_scalar`]: a square root and a division per entry, exact
+/// at every register width, so every instruction set gives the same bits.
+pub fn kernel_column(coords: [&[f64]; 3], c: [f64; 3], weights: &[f64], out: &mut [f64]) {
+    assert!(coords.iter().all(|x| x.len() == out.len()) && weights.len() == out.len(), "one value per point");
+    crate::lanes::dispatch(KernelColumn { coords, c, weights, out });
+}
+
+/// [`kernel_column`] without dispatch: the scalar reference.
+pub fn kernel_column_scalar(coords: [&[f64]; 3], c: [f64; 3], weights: &[f64], out: &mut [f64]) {
+    column_loop(coords, c, weights, out);
+}
+
+struct KernelColumn<'a> {
+    coords: [&'a [f64]; 3],
+    c: [f64; 3],
+    weights: &'a [f64],
+    out: &'a mut [f64],
+}
+
+impl pulp::WithSimd for KernelColumn<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        column_loop(self.coords, self.c, self.weights, self.out);
+    }
+}
+
+/// The loop of [`kernel_column`], inlined where it runs so that the
+/// compiler vectorises it for the instruction set at hand.
+#[inline(always)]
+fn column_loop(coords: [&[f64]; 3], c: [f64; 3], weights: &[f64], out: &mut [f64]) {
+    let n = out.len();
+    let (x, y, z, w) = (&coords[0][..n], &coords[1][..n], &coords[2][..n], &weights[..n]);
+    for i in 0..n {
+        let (dx, dy, dz) = (x[i] - c[0], y[i] - c[1], z[i] - c[2]);
+        out[i] = w[i] * (1.0 / (dx * dx + dy * dy + dz * dz).sqrt());
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,6 +205,26 @@ mod tests {
         let weights = (0..13 * k).map(|i| ((i * 37 % 11) as f64 - 5.0) * 0.1).collect();
         let linear = (0..k).map(|a| [0.1 * a as f64, -0.2, 0.3, 0.05 * a as f64]).collect();
         (centres, weights, linear)
+    }
+
+    #[test]
+    fn kernel_columns_agree_on_every_instruction_set() {
+        let n = 37;
+        let coords: [Vec<f64>; 3] =
+            std::array::from_fn(|d| (0..n).map(|i| ((i * (d + 3)) as f64 * 0.37).sin()).collect());
+        let weights: Vec<f64> = (0..n).map(|i| if i < 5 { 10.0 } else { 1.0 }).collect();
+        let (c, coords) = ([1.7, -0.4, 2.1], [&coords[0][..], &coords[1][..], &coords[2][..]]);
+        let mut reference = vec![0.0; n];
+        kernel_column_scalar(coords, c, &weights, &mut reference);
+        for (i, v) in reference.iter().enumerate() {
+            let r = (0..3).map(|d| (coords[d][i] - c[d]).powi(2)).sum::<f64>().sqrt();
+            assert!((v - weights[i] / r).abs() <= 1e-15 * v.abs(), "point {i}");
+        }
+        for level in crate::lanes::levels::available("kernel column") {
+            let mut out = vec![0.0; n];
+            crate::lanes::levels::run(level, KernelColumn { coords, c, weights: &weights, out: &mut out });
+            assert_eq!(out, reference, "{level:?}");
+        }
     }
 
     /// Every instruction set this machine offers (forced one by one) gives

@@ -11,7 +11,7 @@
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
-use cleave_kernels::{elasticity, envelope, moments, polynomial, rotation, spmv};
+use cleave_kernels::{elasticity, envelope, harmonic, moments, polynomial, rotation, spmv};
 
 use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
 
@@ -58,6 +58,32 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
         run: Box::new(move |reference| {
             let kernel = if reference { EvalKernel::HarmonicScalar(&basis) } else { EvalKernel::Harmonic(&basis) };
             basis_eval_ms(&hm, 20 * scale, kernel).0
+        }),
+    });
+
+    // the kernel columns of a 24-node element's MFS matrix (744 points,
+    // 248 centres, scaled coordinates)
+    let points = 744;
+    let coords: [Vec<f64>; 3] = std::array::from_fn(|d| (0..points).map(|i| 0.5 * noise(3 * i + d)).collect());
+    let centres: Vec<[f64; 3]> =
+        (0..248).map(|j| std::array::from_fn(|d| 0.8 + 0.3 * noise(1000 + 3 * j + d))).collect();
+    let row_weights: Vec<f64> = (0..points).map(|i| if i < 24 { 10.0 } else { 1.0 }).collect();
+    let mut column = vec![0.0; points];
+    let reps = 10 * scale;
+    kernels.push(Kernel {
+        name: "harmonic kernel column",
+        size: format!("{reps} x {} centres x {points} points", centres.len()),
+        run: Box::new(move |reference| {
+            let coords = [&coords[0][..], &coords[1][..], &coords[2][..]];
+            let fill = if reference { harmonic::kernel_column_scalar } else { harmonic::kernel_column };
+            let (ms, ()) = best_ms(3, || {
+                for _ in 0..reps {
+                    for &c in &centres {
+                        fill(coords, c, &row_weights, &mut column);
+                    }
+                }
+            });
+            ms
         }),
     });
 

@@ -73,14 +73,11 @@ impl<const D: usize> Fit<D> {
 
 /// `out_i = w_i ψ(|x_i - c|)` for the points `x_i` given by coordinate
 /// (`coords[d][i]`): the kernel column of centre `c`, the same values as
-/// `w_i * kernel(distance(x_i, c))`.
+/// `w_i * kernel(distance(x_i, c))` (in 3D by the dispatched kernel of
+/// [`cleave_kernels::harmonic::kernel_column`]).
 fn kernel_column<const D: usize>(coords: &[Vec<f64>; D], c: [f64; D], weights: &[f64], out: &mut [f64]) {
-    if D == 3 {
-        let (x, y, z) = (&coords[0][..out.len()], &coords[1][..out.len()], &coords[2][..out.len()]);
-        for i in 0..out.len() {
-            let (dx, dy, dz) = (x[i] - c[0], y[i] - c[1], z[i] - c[2]);
-            out[i] = weights[i] * (1.0 / (dx * dx + dy * dy + dz * dz).sqrt());
-        }
+    if let (Some(coords), Some(c)) = (<&[Vec<f64>; 3]>::try_from(&coords[..]).ok(), <[f64; 3]>::try_from(&c[..]).ok()) {
+        cleave_kernels::harmonic::kernel_column([&coords[0], &coords[1], &coords[2]], c, weights, out);
     } else {
         for (i, v) in out.iter_mut().enumerate() {
             let r2 = (0..D).map(|d| (coords[d][i] - c[d]) * (coords[d][i] - c[d])).sum::<f64>();
