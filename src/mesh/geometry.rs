@@ -112,7 +112,7 @@ pub fn fold_depth<K: Copy + Eq + std::hash::Hash + Ord>(loops: &[Vec<(K, [f64; 3
         let (c, n) = planes[f];
         loops[g].iter().map(|p| dot(sub(p.1, c), n)).fold(f64::NEG_INFINITY, f64::max)
     };
-    let mut edges: std::collections::HashMap<(K, K), usize> = std::collections::HashMap::new();
+    let mut edges: rustc_hash::FxHashMap<(K, K), usize> = Default::default();
     let mut worst = f64::NEG_INFINITY;
     for (k, lp) in loops.iter().enumerate() {
         for i in 0..lp.len() {

@@ -4,7 +4,7 @@
 //! lists them all (for `cleave info`). Every error names the problem and the
 //! place (node, face or element id, zero-based).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use cleave_kernels::vec3::{dot, sub};
 use thiserror::Error;
@@ -304,7 +304,7 @@ impl PolyMesh {
     /// Checks that every edge of element `e` is used by exactly two of its
     /// faces in opposite directions.
     fn check_element_closed(&self, e: usize) -> Result<(), MeshError> {
-        let mut uses: HashMap<(u32, u32), (usize, i32)> = HashMap::new();
+        let mut uses: HashMap<(u32, u32), (usize, i32)> = HashMap::default();
         for r in &self.elements[e].faces {
             let v = &self.faces[r.face as usize].vertices;
             for i in 0..v.len() {
@@ -340,7 +340,7 @@ impl PolyMesh {
             return Vec::new();
         }
         let cell = |p: [f64; 3]| -> [i64; 3] { [0, 1, 2].map(|i| ((p[i] - lo[i]) / tol).floor() as i64) };
-        let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::default();
         for (i, p) in self.nodes.iter().enumerate() {
             grid.entry(cell(*p)).or_default().push(i);
         }

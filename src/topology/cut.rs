@@ -51,7 +51,7 @@ impl CutReport {
         touched: Vec<u32>,
     ) -> Self {
         let nodes_before = nodes_before as u32;
-        let mut original: std::collections::HashMap<u32, u32> = duplicated.iter().map(|&(o, c)| (c, o)).collect();
+        let mut original: rustc_hash::FxHashMap<u32, u32> = duplicated.iter().map(|&(o, c)| (c, o)).collect();
         original.retain(|_, o| *o < nodes_before);
         let mut old_nodes: Vec<u32> = touched
             .iter()

@@ -13,7 +13,7 @@
 //!
 //! The polygon must be convex and planar; positions are in the rest frame.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 use rayon::prelude::*;
@@ -195,7 +195,7 @@ pub fn cut_by_polygon_keeping(
         region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
     region_faces.sort_unstable();
     region_faces.dedup();
-    let mut users: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut users: HashMap<u32, Vec<u32>> = HashMap::default();
     for &e in &region {
         for r in &mesh.elements[e as usize].faces {
             users.entry(r.face).or_default().push(e);
@@ -234,7 +234,7 @@ pub fn cut_by_polygon_keeping(
     // along a chord through it instead of next to it (the parts stay
     // planar and convex, only the cut's outline strays from the line), so
     // no node is made closer than that to a node of an element on its edge
-    let mut line_snap: HashMap<u32, f64> = HashMap::new();
+    let mut line_snap: HashMap<u32, f64> = HashMap::default();
     for &e in &region {
         let r = opts.snap * mesh.element_diameter(e as usize);
         for &v in &mesh.elements[e as usize].nodes {
@@ -243,8 +243,8 @@ pub fn cut_by_polygon_keeping(
         }
     }
     // faces touching each node of the plane (stale entries are re-checked)
-    let mut node_faces: HashMap<u32, Vec<u32>> = HashMap::new();
-    let plane_vertices: std::collections::HashSet<u32> =
+    let mut node_faces: HashMap<u32, Vec<u32>> = HashMap::default();
+    let plane_vertices: rustc_hash::FxHashSet<u32> =
         in_plane.iter().flat_map(|&f| mesh.faces[f as usize].vertices.iter().copied()).collect();
     for &f in &region_faces {
         for &v in &mesh.faces[f as usize].vertices {
@@ -253,7 +253,7 @@ pub fn cut_by_polygon_keeping(
             }
         }
     }
-    let mut edge_node: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut edge_node: HashMap<(u32, u32), u32> = HashMap::default();
     let mut touched_faces: Vec<u32> = Vec::new();
     for i in 0..n_pts {
         let (a2, b2) = (outline[i], outline[(i + 1) % n_pts]);

@@ -31,7 +31,7 @@
 //! surface strays from the plane by at most one element. Nothing moves, so
 //! the volume stays exact.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 use rayon::prelude::*;
@@ -257,7 +257,7 @@ pub(crate) fn classify(
         .collect();
     // snapping radius of each node: `snap` times the smallest straddling
     // element holding it
-    let mut radius: HashMap<u32, f64> = HashMap::new();
+    let mut radius: HashMap<u32, f64> = HashMap::default();
     for &e in &straddling {
         let r = opts.snap * mesh.element_diameter(e);
         for &v in &mesh.elements[e].nodes {
@@ -298,7 +298,7 @@ pub(crate) fn classify(
         .collect();
     // the elements on each crossed edge (every element holding an edge with
     // ends on opposite sides has nodes on both sides)
-    let mut edge_users: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    let mut edge_users: HashMap<(u32, u32), Vec<usize>> = HashMap::default();
     for &e in &both {
         for r in &mesh.elements[e].faces {
             let v = &mesh.faces[r.face as usize].vertices;
@@ -498,13 +498,13 @@ fn face_partly_on_plane(nodes: &[[f64; 3]], dist: &[f64], v: &[u32], side: &[i8]
 /// centre, so it holds for a cap bent through snapped nodes. `None` unless
 /// those edges form one simple loop of at least three points.
 fn cap_loop<K: Copy + Eq + std::hash::Hash + Ord>(faces: &[Vec<K>]) -> Option<Vec<K>> {
-    let mut directed: HashMap<(K, K), usize> = HashMap::new();
+    let mut directed: HashMap<(K, K), usize> = HashMap::default();
     for lp in faces {
         for i in 0..lp.len() {
             *directed.entry((lp[i], lp[(i + 1) % lp.len()])).or_insert(0) += 1;
         }
     }
-    let mut next: HashMap<K, K> = HashMap::new();
+    let mut next: HashMap<K, K> = HashMap::default();
     for (&(a, b), &count) in &directed {
         if count == 1 && !directed.contains_key(&(b, a)) && next.insert(a, b).is_some() {
             return None;
@@ -547,7 +547,7 @@ fn cap_pieces(points: &[[f64; 3]], plane: &Plane) -> Vec<Vec<usize>> {
     let tolerance = CAP_PLANARITY * diameter(points);
     let flat: Vec<bool> =
         triangles.iter().map(|t| t.iter().all(|&i| plane.distance(points[i as usize]).abs() <= tolerance)).collect();
-    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::new();
+    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::default();
     for (k, t) in triangles.iter().enumerate() {
         for i in 0..3 {
             by_edge.insert((t[i], t[(i + 1) % 3]), k);
@@ -606,7 +606,7 @@ pub(crate) fn split(
     nearby_faces.sort_unstable();
     nearby_faces.dedup();
     // 1. crossing nodes, one per crossed edge
-    let mut edge_node: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut edge_node: HashMap<(u32, u32), u32> = HashMap::default();
     let mut new_node = |mesh: &mut PolyMesh, report: &mut SplitReport, a: u32, b: u32| -> u32 {
         let (lo, hi, t, x) = crossing(&mesh.nodes, &dist, a, b);
         *edge_node.entry((lo, hi)).or_insert_with(|| {
@@ -618,7 +618,7 @@ pub(crate) fn split(
     };
     let side_of = |x: u32| side.get(x as usize).copied().unwrap_or(0);
     // 2. split the crossed faces: face -> (positive part, negative part)
-    let mut face_parts: HashMap<u32, (u32, u32)> = HashMap::new();
+    let mut face_parts: HashMap<u32, (u32, u32)> = HashMap::default();
     for &e in &crossed {
         for r in mesh.elements[e].faces.clone() {
             if face_parts.contains_key(&r.face) {
