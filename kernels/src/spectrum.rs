@@ -36,7 +36,7 @@
 //! steps and sequential sums, 9 µs now, most of it the triangular solves'
 //! chain of dependent updates, which wider registers do not shorten: the
 //! kernel is not dispatched). Deterministic (fixed start vectors,
-//! fixed summation order: see [`crate::lanes::ordered_dot`]), so the result
+//! fixed summation order: see `lanes::ordered_dot`), so the result
 //! does not depend on the thread that computes it.
 
 use crate::lanes::ordered_dot as dot;
