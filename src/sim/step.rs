@@ -67,26 +67,27 @@ impl Default for StepSystem {
 impl StepSystem {
     /// A system for `pattern` solved by `kind`.
     pub fn new(kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) -> Self {
-        let n = 3 * pattern.num_blocks;
-        StepSystem {
-            solver: make_solver(kind, n, tolerance, max_iterations),
+        let mut system = StepSystem {
+            solver: make_solver(kind, 0, tolerance, max_iterations),
             analysed: false,
             referenced: false,
-            values: vec![0.0; pattern.nnz()],
-            rhs: vec![0.0; n],
-            velocity: vec![0.0; n],
-            force: vec![[0.0; 3]; pattern.num_blocks],
-            constraints: Constraints::free(n),
+            values: Vec::new(),
+            rhs: Vec::new(),
+            velocity: Vec::new(),
+            force: Vec::new(),
+            constraints: Constraints::free(0),
             reference: Vec::new(),
             reference_rhs: Vec::new(),
             frames: Vec::new(),
             frame_sums: Vec::new(),
-        }
+        };
+        system.renew(kind, pattern, tolerance, max_iterations);
+        system
     }
 
-    /// Makes this the system of a new topology's `pattern` (as
-    /// [`StepSystem::new`]), keeping the buffers' memory: after a cut the
-    /// next step writes into pages it already has.
+    /// Makes this the system of a new topology's `pattern`, keeping the
+    /// buffers' memory: after a cut the next step writes into pages it
+    /// already has.
     pub fn renew(&mut self, kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) {
         let n = 3 * pattern.num_blocks;
         self.solver = make_solver(kind, n, tolerance, max_iterations);
