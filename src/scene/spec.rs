@@ -403,7 +403,8 @@ pub enum SolverName {
     Cholesky,
     /// `"sparse-cholesky"`: the sparse supernodal factorisation at every size.
     SparseCholesky,
-    /// `"cg"`: block-Jacobi preconditioned conjugate gradients.
+    /// `"cg"`: conjugate gradients preconditioned by block Jacobi plus a
+    /// coarse correction (the translations of aggregates of nodes).
     Cg,
     /// `"cg-rest"`: CG preconditioned by the rotated rest-state factor.
     CgRest,

@@ -6,6 +6,7 @@
 
 mod cg;
 mod cholesky;
+mod coarse;
 mod envelope;
 
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
@@ -104,7 +105,9 @@ pub enum SolverKind {
     /// The sparse supernodal Cholesky at every size (the large-system path
     /// of [`SolverKind::Cholesky`], to compare against).
     SparseCholesky,
-    /// Block-Jacobi preconditioned conjugate gradients, warm-started.
+    /// Conjugate gradients preconditioned by block Jacobi plus a coarse
+    /// correction (the translations of aggregates of nodes),
+    /// warm-started.
     Cg,
     /// Conjugate gradients preconditioned by the Cholesky factor of the
     /// rest-state system, applied in per-node rotated frames
