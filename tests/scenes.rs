@@ -167,78 +167,122 @@ fn cantilever_scene_runs_and_writes_frames() {
     assert!(stdout.contains("6916") && stdout.contains("validation: ok"), "{stdout}");
 }
 
-/// Every shipped scene runs, a scene with cuts all the way through them
-/// (the whole run: `bunny_slices`, the longest, takes about a minute), the
-/// others for three steps (every frame read back by meshio and by VTK's own
-/// reader, with the counts and volumes of the summary, where Python has
-/// them; under CI it must); each keeps its volume and stays healthy by its
-/// own summary: in a dynamic run no element stretched beyond 2x its rest
-/// diameter and no node faster than twice the speed free fall reaches in
-/// the run (`|v0| + g t`), and no node lighter than the store's mass floor.
-#[test]
-fn every_shipped_scene_runs_through_its_cuts_and_stays_healthy() {
-    let readers = python_with(&["meshio", "vtk", "numpy"]);
-    let dir = tempfile::tempdir().unwrap();
-    let mut names = Vec::new();
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(root().join("scenes"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    paths.sort();
-    for path in paths {
-        let scene = LoadedScene::load(&path).unwrap();
-        let out = dir.path().join(path.file_stem().unwrap());
-        let steps = if scene.scene.cut.is_empty() { 3 } else { scene.scene.simulation.steps };
-        let summary = cleave::scene::run_scene(
-            &scene,
-            &cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(steps), ..Default::default() },
-        )
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let name = path.file_stem().unwrap().to_string_lossy().into_owned();
-        println!(
-            "{name}: {} steps, {} -> {} elements, stretch {:.3}, fastest node {:.2} m/s (free fall {:.2}), lightest node {:.3}, {} cut retries",
-            summary.steps,
-            summary.start.elements,
-            summary.end.elements,
-            summary.worst_stretch.value,
-            summary.max_node_speed.value,
-            summary.free_fall_speed,
-            summary.min_mass_ratio.value,
-            summary.cut_retries
-        );
-        assert!(summary.max_displacement.is_finite() && summary.max_displacement > 0.0, "{name}");
-        assert!((summary.end.volume - summary.start.volume).abs() <= 1e-12 * summary.start.volume, "{name}: volume");
-        // (a linear static solve under its own weight, like the cantilever's
-        // 39 m sag of a 4 m beam, stretches by design; run health concerns
-        // dynamic runs)
-        let dynamic = summary.mode == "dynamic";
-        assert!(!dynamic || summary.worst_stretch.value <= 2.0, "{name}: {:?}", summary.worst_stretch);
-        if dynamic && summary.free_fall_speed > 0.0 {
-            let bound = 2.0 * summary.free_fall_speed;
-            assert!(summary.max_node_speed.value <= bound, "{name}: {:?} > {bound}", summary.max_node_speed);
-        }
-        let floor = scene.scene.basis_options().health.mass_fraction;
-        assert!(summary.min_mass_ratio.value >= floor, "{name}: {:?}", summary.min_mass_ratio);
-        assert!(out.join("summary.json").exists());
-        if let Ok(()) = &readers {
-            let (a, b) = (&summary.start, &summary.end);
-            let status = std::process::Command::new("python3")
-                .arg(root().join("tests/check_frames.py"))
-                .arg(&out)
-                .args([a.elements.to_string(), a.volume.to_string(), b.elements.to_string(), b.volume.to_string()])
-                .status()
-                .unwrap();
-            assert!(status.success(), "{name}: meshio or VTK misreads a frame");
-        }
-        names.push(name);
-    }
+/// Runs the shipped scene `scenes/<name>.toml`: a scene with cuts all the
+/// way through them (the whole run: `bunny_slices`, the longest, takes
+/// about a minute), the others for three steps (every frame read back by
+/// meshio and by VTK's own reader, with the counts and volumes of the
+/// summary, where Python has them; under CI it must). The scene must keep
+/// its volume and stay healthy by its own summary: in a dynamic run no
+/// element stretched beyond 2x its rest diameter and no node faster than
+/// twice the speed free fall reaches in the run (`|v0| + g t`), and no
+/// node lighter than the store's mass floor.
+fn run_shipped_scene(name: &str) {
+    static READERS: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+    let readers = READERS.get_or_init(|| python_with(&["meshio", "vtk", "numpy"]));
     if let Err(why) = readers {
         assert!(std::env::var_os("CLEAVE_CI").is_none(), "CI must check the frames with meshio and VTK: {why}");
         println!("frames not checked by meshio and VTK: {why}");
     }
-    println!("ran {names:?}");
-    assert!(names.len() >= 4, "{names:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let path = root().join("scenes").join(format!("{name}.toml"));
+    let scene = LoadedScene::load(&path).unwrap();
+    let out = dir.path().join(name);
+    let steps = if scene.scene.cut.is_empty() { 3 } else { scene.scene.simulation.steps };
+    let summary = cleave::scene::run_scene(
+        &scene,
+        &cleave::scene::RunOptions { out: Some(out.clone()), steps: Some(steps), ..Default::default() },
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    println!(
+        "{name}: {} steps, {} -> {} elements, stretch {:.3}, fastest node {:.2} m/s (free fall {:.2}), lightest node {:.3}, {} cut retries",
+        summary.steps,
+        summary.start.elements,
+        summary.end.elements,
+        summary.worst_stretch.value,
+        summary.max_node_speed.value,
+        summary.free_fall_speed,
+        summary.min_mass_ratio.value,
+        summary.cut_retries
+    );
+    assert!(summary.max_displacement.is_finite() && summary.max_displacement > 0.0, "{name}");
+    assert!((summary.end.volume - summary.start.volume).abs() <= 1e-12 * summary.start.volume, "{name}: volume");
+    // (a linear static solve under its own weight, like the cantilever's
+    // 39 m sag of a 4 m beam, stretches by design; run health concerns
+    // dynamic runs)
+    let dynamic = summary.mode == "dynamic";
+    assert!(!dynamic || summary.worst_stretch.value <= 2.0, "{name}: {:?}", summary.worst_stretch);
+    if dynamic && summary.free_fall_speed > 0.0 {
+        let bound = 2.0 * summary.free_fall_speed;
+        assert!(summary.max_node_speed.value <= bound, "{name}: {:?} > {bound}", summary.max_node_speed);
+    }
+    let floor = scene.scene.basis_options().health.mass_fraction;
+    assert!(summary.min_mass_ratio.value >= floor, "{name}: {:?}", summary.min_mass_ratio);
+    assert!(out.join("summary.json").exists());
+    if readers.is_ok() {
+        let (a, b) = (&summary.start, &summary.end);
+        let status = std::process::Command::new("python3")
+            .arg(root().join("tests/check_frames.py"))
+            .arg(&out)
+            .args([a.elements.to_string(), a.volume.to_string(), b.elements.to_string(), b.volume.to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "{name}: meshio or VTK misreads a frame");
+    }
+}
+
+/// One test per shipped scene (so that the test threads share them out),
+/// and [`SHIPPED_SCENES`], which must name every scene in `scenes/`.
+macro_rules! shipped_scenes {
+    ($($name:ident),* $(,)?) => {
+        /// Every scene the tests run, by file stem.
+        const SHIPPED_SCENES: &[&str] = &[$(stringify!($name)),*];
+        mod shipped_scene {
+            $(
+                #[test]
+                fn $name() {
+                    super::run_shipped_scene(stringify!($name));
+                }
+            )*
+        }
+    };
+}
+
+shipped_scenes!(
+    bar_refine_bend,
+    bar_refine_twist,
+    bunny_cut,
+    bunny_cut_dg,
+    bunny_drop,
+    bunny_octree,
+    bunny_sliced,
+    bunny_sliced_harmonic,
+    bunny_slices,
+    cantilever_harmonic,
+    cantilever_polyhedral,
+    cantilever_tet,
+    cube_slice,
+    dg_bunny_from_cube,
+    dg_cantilever,
+    dg_pencil,
+    dg_table1,
+    nonconvex_element,
+    patch_test_tet,
+    random_cube_drop,
+    single_element,
+    single_element_slope,
+);
+
+/// A scene added to `scenes/` must be added to [`shipped_scenes!`] too.
+#[test]
+fn every_shipped_scene_has_its_test() {
+    let mut found: Vec<String> = std::fs::read_dir(root().join("scenes"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    found.sort();
+    assert_eq!(found, SHIPPED_SCENES, "scenes/ and the list of shipped_scenes! differ");
 }
 
 /// Whether `python3` imports every module of `modules`.
