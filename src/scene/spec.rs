@@ -404,7 +404,7 @@ pub enum SolverName {
     /// `"sparse-cholesky"`: the sparse supernodal factorisation at every size.
     SparseCholesky,
     /// `"cg"`: conjugate gradients preconditioned by block Jacobi plus a
-    /// coarse correction (the translations of aggregates of nodes).
+    /// coarse correction (the rigid motions of aggregates of nodes).
     Cg,
     /// `"cg-rest"`: CG preconditioned by the rotated rest-state factor.
     CgRest,

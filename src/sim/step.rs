@@ -170,7 +170,7 @@ impl Simulation {
             constrain(pattern, boundary, nodal.then_some(&self.mesh.nodes[..]), masses, state, h, system)
         });
         // 5.
-        let solve = timings.time(Phase::Solve, || solve(elements, pattern, masses, state, c_m, c_k, system))?;
+        let solve = timings.time(Phase::Solve, || solve(elements, pattern, masses, state, nodal, c_m, c_k, system))?;
         // 6.
         let (state, nodes, rest) = (&mut self.state, &mut self.nodes, rest(&self.mesh, &self.elements));
         timings.time(Phase::Integrate, || {
@@ -330,13 +330,16 @@ fn constrain(
 }
 
 /// Phase 5: the rotated preconditioner's reference and frames when the
-/// solver wants them, then factor and solve, warm-started from the
-/// velocity extrapolated linearly from the last two steps.
+/// solver wants them, the blocks' positions where blocks are nodes
+/// (`nodal`), then factor and solve, warm-started from the velocity
+/// extrapolated linearly from the last two steps.
+#[allow(clippy::too_many_arguments)]
 fn solve(
     elements: &impl Discretization,
     pattern: &SparsePattern,
     masses: &[f64],
     state: &NodeState,
+    nodal: bool,
     c_m: f64,
     c_k: f64,
     system: &mut StepSystem,
@@ -363,6 +366,9 @@ fn solve(
     }
     for ((v, now), before) in system.velocity.chunks_exact_mut(3).zip(&state.velocity).zip(&state.previous_velocity) {
         (0..3).for_each(|d| v[d] = 2.0 * now[d] - before[d]);
+    }
+    if nodal {
+        system.solver.set_positions(&state.position);
     }
     let matrix = pattern.matrix(&system.values);
     system.solver.factor(matrix)?;

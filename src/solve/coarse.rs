@@ -1,15 +1,18 @@
-//! The coarse level of a two-level preconditioner: the translations of
+//! The coarse level of a two-level preconditioner: the rigid motions of
 //! aggregates of blocks.
 //!
 //! Blocks (nodes) are grouped into aggregates by greedy aggregation of the
 //! matrix graph, repeated on the graph of the aggregates until at most a
-//! given number remain. The prolongation `P` maps the three translations of
-//! each aggregate to its blocks (`P_ia = I` for block `i` of aggregate
-//! `a`), so the coarse matrix `A_c = Pᵀ A P` sums the 3x3 blocks of `A`
-//! between two aggregates. The correction added to the smoother's `z` is
-//! `P A_c⁻¹ Pᵀ r`. It removes at once the error that block Jacobi reduces
-//! slowly: motions of whole regions, which only the mass resists while
-//! block Jacobi divides by the much larger stiffness diagonal.
+//! given number remain. The prolongation `P` maps the rigid motions of
+//! each aggregate to its blocks: `P_ia = [I  S_i]` for block `i` of
+//! aggregate `a`, `S_i = -[d_i]×` the infinitesimal rotations about the
+//! aggregate's centroid (`d_i` the block's position from it, so that
+//! `S_i ω = ω × d_i`), or `P_ia = I` (translations alone) when the blocks
+//! have no positions. The correction added to the smoother's `z` is
+//! `P A_c⁻¹ Pᵀ r` with `A_c = Pᵀ A P`. It removes at once the error that
+//! block Jacobi reduces slowly: motions of whole regions, which only the
+//! mass resists while block Jacobi divides by the much larger stiffness
+//! diagonal.
 //!
 //! Aggregates follow the matrix graph, so no aggregate spans two pieces of
 //! a cut body. Every sum runs in a fixed order, so the correction has the
@@ -23,15 +26,15 @@ use rayon::prelude::*;
 use super::{BlockStructure, SolveError};
 
 /// The most aggregates the coarse level takes for a matrix storing
-/// `stored` values: `m = ∛stored`. Its dense factor then costs
-/// `(3m)³ / 3 = 9 · stored` flops once per step (a few passes over the
-/// matrix) and its triangular solves `9 m²` flops per iteration, a small
-/// fraction of the product's `2 · stored`. (On bunny_100k, 2.3M values,
-/// the aggregation rounds give about 1.6k, then 32 aggregates: 32 take the
-/// CG steps of `cleave bench` from 86 to 29 iterations; a thousand take
-/// them to 22, at the cost of a dense factor of 3,000 unknowns per step.)
+/// `stored` values: `m = ∛stored / 2`. Its dense factor of six modes per
+/// aggregate then costs `(6m)³ / 3 = 9 · stored` flops once per step (a
+/// few passes over the matrix) and its triangular solves `36 m²` flops per
+/// iteration, a small fraction of the product's `2 · stored`. (On
+/// bunny_100k, 2.3M values, the aggregation rounds give about 1.6k, then
+/// 32 aggregates; with 32, the CG steps of `cleave bench` take 26
+/// iterations at 1e-6 where block Jacobi alone took 86.)
 pub(super) fn aggregate_limit(stored: usize) -> usize {
-    (stored as f64).cbrt() as usize
+    ((stored as f64).cbrt() / 2.0) as usize
 }
 
 /// Marks a vertex without aggregate.
@@ -48,6 +51,10 @@ const RUN_TASK_COLUMNS: usize = 512;
 pub(super) struct CoarseSpace {
     /// Aggregate of every block.
     of: Vec<u32>,
+    /// Every block's position from its aggregate's centroid (m), when the
+    /// blocks have positions (then each aggregate has six modes, else
+    /// three).
+    offsets: Vec<[f64; 3]>,
     /// Blocks of aggregate `a` at `members[ptr[a]..ptr[a + 1]]`, ascending.
     ptr: Vec<u32>,
     members: Vec<u32>,
@@ -58,10 +65,12 @@ pub(super) struct CoarseSpace {
     run_ptr: Vec<u32>,
     run_end: Vec<u32>,
     run_aggregate: Vec<u32>,
-    /// The sum of the blocks of every run (`[3 c + r]` for entry `(r, c)`).
-    run_sums: Vec<[f64; 9]>,
-    /// `A_c` (column-major, `3m x 3m` for `m` aggregates), overwritten by
-    /// its lower Cholesky factor.
+    /// The sums of the blocks `A_ij` of every run, `Σ A_ij` and, with
+    /// positions, `Σ S_iᵀ A_ij` (`[3 c + r]` and `[9 + 3 c + r]` for entry
+    /// `(r, c)`).
+    run_sums: Vec<[f64; 18]>,
+    /// `A_c` (column-major, `k m x k m` for `m` aggregates of `k` modes),
+    /// overwritten by its lower Cholesky factor.
     factor: Vec<f64>,
     /// `Pᵀ r` per task of [`TASK_BLOCKS`] blocks, then summed in order.
     partial: Vec<f64>,
@@ -110,9 +119,8 @@ impl CoarseSpace {
             }
             run_ptr.push(run_end.len() as u32);
         }
-        let run_sums = vec![[0.0; 9]; run_end.len()];
-        let partial = vec![0.0; n.div_ceil(TASK_BLOCKS) * 3 * count];
-        CoarseSpace { of, ptr, members, run_ptr, run_end, run_aggregate, run_sums, partial, ..Default::default() }
+        let run_sums = vec![[0.0; 18]; run_end.len()];
+        CoarseSpace { of, ptr, members, run_ptr, run_end, run_aggregate, run_sums, ..Default::default() }
     }
 
     /// Number of aggregates.
@@ -120,27 +128,90 @@ impl CoarseSpace {
         self.ptr.len() - 1
     }
 
+    /// Modes per aggregate: 6 with positions, else 3.
+    fn modes(&self) -> usize {
+        if self.offsets.is_empty() {
+            3
+        } else {
+            6
+        }
+    }
+
+    /// Takes the blocks' positions (m), one per block: from now on each
+    /// aggregate has its rotations too. Positions of another length are
+    /// refused (the coarse level keeps translations alone).
+    pub fn set_positions(&mut self, positions: &[[f64; 3]]) {
+        if positions.len() != self.of.len() {
+            self.offsets.clear();
+            return;
+        }
+        self.offsets.resize(positions.len(), [0.0; 3]);
+        let (ptr, members) = (&self.ptr, &self.members);
+        for a in 0..ptr.len() - 1 {
+            let blocks = &members[ptr[a] as usize..ptr[a + 1] as usize];
+            let mut c = [0.0; 3];
+            for &i in blocks {
+                (0..3).for_each(|d| c[d] += positions[i as usize][d]);
+            }
+            let n = blocks.len() as f64;
+            for &i in blocks {
+                let x = positions[i as usize];
+                self.offsets[i as usize] = std::array::from_fn(|d| x[d] - c[d] / n);
+            }
+        }
+    }
+
     /// Assembles `A_c = Pᵀ A P` from the values on `blocks` and factors it.
     /// The run sums stream through the values in their order; each coarse
-    /// column block then adds the run sums of its members, in order.
+    /// column block `b` then adds, for each member `j` and each run of
+    /// aggregate `a` in its column, `[T  T S_j; U  U S_j]` to `A_c[a, b]`
+    /// (`T = Σ A_ij`, `U = Σ S_iᵀ A_ij`). Rotations of an aggregate too
+    /// small or too flat to rotate (a single node, nodes on a line) have no
+    /// stiffness: every rotation's diagonal gets `1e-12` of the largest
+    /// diagonal entry, so the factor exists and such a mode, whose `P`
+    /// column is zero, corrects nothing.
     pub fn factor(&mut self, blocks: &BlockStructure, values: &[f64]) -> Result<(), SolveError> {
-        let m = 3 * self.aggregates();
+        let (k, rotations) = (self.modes(), !self.offsets.is_empty());
+        let m = k * self.aggregates();
         let mut sums = std::mem::take(&mut self.run_sums);
         self.sum_runs(blocks, values, 0..blocks.ptr.len() - 1, &mut sums);
         self.run_sums = sums;
         let mut dense = std::mem::take(&mut self.factor);
         dense.resize(m * m, 0.0);
-        dense.par_chunks_mut(3 * m).enumerate().for_each(|(b, cols)| {
+        dense.par_chunks_mut(k * m).enumerate().for_each(|(b, cols)| {
             cols.fill(0.0);
             for &j in &self.members[self.ptr[b] as usize..self.ptr[b + 1] as usize] {
                 let runs = self.run_ptr[j as usize] as usize..self.run_ptr[j as usize + 1] as usize;
+                let dj = if rotations { self.offsets[j as usize] } else { [0.0; 3] };
                 for (sum, &a) in self.run_sums[runs.clone()].iter().zip(&self.run_aggregate[runs]) {
-                    for (c, col) in cols.chunks_exact_mut(m).enumerate() {
-                        (0..3).for_each(|r| col[3 * a as usize + r] += sum[3 * c + r]);
+                    let a = k * a as usize;
+                    for c in 0..3 {
+                        let col = &mut cols[c * m..(c + 1) * m];
+                        (0..3).for_each(|r| col[a + r] += sum[3 * c + r]);
+                        if rotations {
+                            (0..3).for_each(|r| col[a + 3 + r] += sum[9 + 3 * c + r]);
+                        }
+                    }
+                    if rotations {
+                        // column c of M S_j is M (e_c × d_j)
+                        for c in 0..3 {
+                            let e = cross(unit(c), dj);
+                            let col = &mut cols[(3 + c) * m..(4 + c) * m];
+                            for r in 0..3 {
+                                col[a + r] += (0..3).map(|q| sum[3 * q + r] * e[q]).sum::<f64>();
+                                col[a + 3 + r] += (0..3).map(|q| sum[9 + 3 * q + r] * e[q]).sum::<f64>();
+                            }
+                        }
                     }
                 }
             }
         });
+        if rotations {
+            let largest = (0..m).map(|i| dense[i * m + i]).fold(0.0f64, f64::max);
+            for a in 0..self.aggregates() {
+                (3..6).for_each(|r| dense[(6 * a + r) * (m + 1)] += 1e-12 * largest);
+            }
+        }
         let stack = self.stack.get_or_insert_with(|| {
             MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(m, Par::Seq, Default::default()))
         });
@@ -163,7 +234,13 @@ impl CoarseSpace {
     /// The run sums of the block columns `columns` into `out` (theirs
     /// alone), halving the range across threads down to
     /// [`RUN_TASK_COLUMNS`] columns.
-    fn sum_runs(&self, blocks: &BlockStructure, values: &[f64], columns: std::ops::Range<usize>, out: &mut [[f64; 9]]) {
+    fn sum_runs(
+        &self,
+        blocks: &BlockStructure,
+        values: &[f64],
+        columns: std::ops::Range<usize>,
+        out: &mut [[f64; 18]],
+    ) {
         if columns.len() > RUN_TASK_COLUMNS {
             let mid = columns.start + columns.len() / 2;
             let split = (self.run_ptr[mid] - self.run_ptr[columns.start]) as usize;
@@ -176,15 +253,22 @@ impl CoarseSpace {
         }
         let first_run = self.run_ptr[columns.start] as usize;
         for j in columns {
-            let stride = 3 * (blocks.ptr[j + 1] - blocks.ptr[j]) as usize;
+            let rows = &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+            let stride = 3 * rows.len();
             let column = &values[blocks.start[j]..blocks.start[j] + 3 * stride];
             let runs = self.run_ptr[j] as usize..self.run_ptr[j + 1] as usize;
             let mut p = 0;
             for (k, &end) in runs.clone().zip(&self.run_end[runs]) {
-                let mut sum = [0.0; 9];
+                let mut sum = [0.0; 18];
                 for q in p..end as usize {
-                    for c in 0..3 {
-                        (0..3).for_each(|r| sum[3 * c + r] += column[c * stride + 3 * q + r]);
+                    let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3]);
+                    (0..9).for_each(|e| sum[e] += block[e]);
+                    if let Some(d) = self.offsets.get(rows[q] as usize) {
+                        // S_iᵀ = [d_i]×: column c of S_iᵀ A_ij is d_i × (column c of A_ij)
+                        for c in 0..3 {
+                            let v = cross(*d, [block[3 * c], block[3 * c + 1], block[3 * c + 2]]);
+                            (0..3).for_each(|r| sum[9 + 3 * c + r] += v[r]);
+                        }
                     }
                 }
                 out[k - first_run] = sum;
@@ -196,15 +280,32 @@ impl CoarseSpace {
     /// `z += P A_c⁻¹ Pᵀ r`; returns `r · P A_c⁻¹ Pᵀ r`, the correction's
     /// share of `r · z`.
     pub fn correct(&mut self, r: &[f64], z: &mut [f64]) -> f64 {
-        let m = 3 * self.aggregates();
+        let k = self.modes();
+        let m = k * self.aggregates();
         // Pᵀ r: per task of blocks in order, then the tasks in order
-        let of = &self.of;
+        let (of, offsets) = (&self.of, &self.offsets);
+        self.partial.resize(r.len().div_ceil(3 * TASK_BLOCKS) * m, 0.0);
         self.partial.par_chunks_mut(m).zip(r.par_chunks(3 * TASK_BLOCKS)).enumerate().for_each(|(t, (partial, r))| {
             partial.fill(0.0);
+            // runs of blocks in one aggregate are summed in registers
+            let mut add = |a: usize, sum: &[f64; 6]| {
+                partial[k * a..k * a + k].iter_mut().zip(sum).for_each(|(p, s)| *p += s);
+            };
+            let (mut current, mut sum) = (of[t * TASK_BLOCKS] as usize, [0.0; 6]);
             for (q, r) in r.chunks_exact(3).enumerate() {
-                let a = 3 * of[t * TASK_BLOCKS + q] as usize;
-                (0..3).for_each(|d| partial[a + d] += r[d]);
+                let i = t * TASK_BLOCKS + q;
+                let a = of[i] as usize;
+                if a != current {
+                    add(current, &sum);
+                    (current, sum) = (a, [0.0; 6]);
+                }
+                (0..3).for_each(|d| sum[d] += r[d]);
+                if let Some(&d) = offsets.get(i) {
+                    let w = cross(d, [r[0], r[1], r[2]]);
+                    (0..3).for_each(|e| sum[3 + e] += w[e]);
+                }
             }
+            add(current, &sum);
         });
         self.restricted.clear();
         self.restricted.resize(m, 0.0);
@@ -220,14 +321,29 @@ impl CoarseSpace {
             MemStack::new(&mut []),
         );
         let correction = &self.correction;
-        z.par_chunks_mut(3 * TASK_BLOCKS).zip(of.par_chunks(TASK_BLOCKS)).for_each(|(z, of)| {
-            for (z, &a) in z.chunks_exact_mut(3).zip(of) {
-                let a = 3 * a as usize;
-                (0..3).for_each(|d| z[d] += correction[a + d]);
+        z.par_chunks_mut(3 * TASK_BLOCKS).zip(of.par_chunks(TASK_BLOCKS)).enumerate().for_each(|(t, (z, of))| {
+            for (q, (z, &a)) in z.chunks_exact_mut(3).zip(of).enumerate() {
+                let a = k * a as usize;
+                let mut add = [correction[a], correction[a + 1], correction[a + 2]];
+                if let Some(&d) = offsets.get(t * TASK_BLOCKS + q) {
+                    let w = cross([correction[a + 3], correction[a + 4], correction[a + 5]], d);
+                    (0..3).for_each(|e| add[e] += w[e]);
+                }
+                (0..3).for_each(|e| z[e] += add[e]);
             }
         });
         self.restricted.iter().zip(correction).map(|(r, e)| r * e).sum()
     }
+}
+
+/// `a × b`.
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// The unit vector along axis `c`.
+fn unit(c: usize) -> [f64; 3] {
+    std::array::from_fn(|d| if d == c { 1.0 } else { 0.0 })
 }
 
 /// One round of greedy aggregation of the graph whose vertex `v` has the
@@ -379,37 +495,97 @@ mod tests {
         }
     }
 
+    /// Positions of the blocks of [`grid`]: on a unit lattice, jittered.
+    fn lattice(nx: usize, ny: usize, nz: usize) -> Vec<[f64; 3]> {
+        (0..nx * ny * nz)
+            .map(|j| {
+                let (x, y, z) = (j % nx, (j / nx) % ny, j / (nx * ny));
+                let jitter = 0.1 * (j as f64 * 1.3).sin();
+                [x as f64 + jitter, y as f64 - jitter, z as f64 + 0.5 * jitter]
+            })
+            .collect()
+    }
+
     /// `A_c = Pᵀ A P` and the correction `P A_c⁻¹ Pᵀ r` against the same
-    /// products formed densely, and the returned `r · z`.
+    /// products formed densely from `P` written out (`[I  -[d_i]×]` per
+    /// block with positions, with the same `1e-12` on the rotations'
+    /// diagonal; `I` without), and the returned `r · z`.
     #[test]
     fn the_correction_is_the_dense_coarse_solve() {
-        let (pattern, values) = grid(6, 5, 4);
+        let (nx, ny, nz) = (6, 5, 4);
+        let (pattern, values) = grid(nx, ny, nz);
         let n = pattern.nrows();
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        let mut coarse = CoarseSpace::new(&blocks, 12);
-        let m = 3 * coarse.aggregates();
-        assert!(m > 3, "a coarse level of more than one aggregate");
-        coarse.factor(&blocks, &values).unwrap();
-        let a = faer::sparse::SparseColMatRef::new(pattern.as_ref(), &values).to_dense();
-        let p = faer::Mat::<f64>::from_fn(n, m, |i, k| {
-            if coarse.of[i / 3] as usize == k / 3 && i % 3 == k % 3 {
-                1.0
-            } else {
-                0.0
+        for rotations in [false, true] {
+            let mut coarse = CoarseSpace::new(&blocks, 12);
+            if rotations {
+                coarse.set_positions(&lattice(nx, ny, nz));
             }
-        });
-        let ac = p.transpose() * &a * &p;
-        let r = faer::Mat::<f64>::from_fn(n, 1, |i, _| (i as f64 * 0.7).sin());
-        let expected = &p * ac.llt(faer::Side::Lower).unwrap().solve(p.transpose() * &r);
-        let base: Vec<f64> = (0..n).map(|i| 0.25 * (i as f64).cos()).collect();
-        let mut z = base.clone();
-        let r_slice: Vec<f64> = (0..n).map(|i| r[(i, 0)]).collect();
-        let rz = coarse.correct(&r_slice, &mut z);
-        for i in 0..n {
-            let got = z[i] - base[i];
-            assert!((got - expected[(i, 0)]).abs() <= 1e-12 * (1.0 + expected[(i, 0)].abs()), "entry {i}");
+            let k = if rotations { 6 } else { 3 };
+            let m = k * coarse.aggregates();
+            assert!(m > k, "a coarse level of more than one aggregate");
+            coarse.factor(&blocks, &values).unwrap();
+            let a = faer::sparse::SparseColMatRef::new(pattern.as_ref(), &values).to_dense();
+            let p = faer::Mat::<f64>::from_fn(n, m, |i, col| {
+                let (block, r) = (i / 3, i % 3);
+                if coarse.of[block] as usize != col / k {
+                    return 0.0;
+                }
+                match col % k {
+                    c if c < 3 => f64::from(u8::from(c == r)),
+                    c => {
+                        // column c - 3 of -[d]×: e_c × d
+                        let d = coarse.offsets[block];
+                        cross(unit(c - 3), d)[r]
+                    }
+                }
+            });
+            let mut ac = p.transpose() * &a * &p;
+            if rotations {
+                let largest = (0..m).map(|i| ac[(i, i)]).fold(0.0f64, f64::max);
+                (0..m).filter(|i| i % 6 >= 3).for_each(|i| ac[(i, i)] += 1e-12 * largest);
+            }
+            let r = faer::Mat::<f64>::from_fn(n, 1, |i, _| (i as f64 * 0.7).sin());
+            let expected = &p * ac.llt(faer::Side::Lower).unwrap().solve(p.transpose() * &r);
+            let base: Vec<f64> = (0..n).map(|i| 0.25 * (i as f64).cos()).collect();
+            let mut z = base.clone();
+            let r_slice: Vec<f64> = (0..n).map(|i| r[(i, 0)]).collect();
+            let rz = coarse.correct(&r_slice, &mut z);
+            for i in 0..n {
+                let got = z[i] - base[i];
+                let want = expected[(i, 0)];
+                assert!((got - want).abs() <= 1e-12 * (1.0 + want.abs()), "rotations {rotations}, entry {i}");
+            }
+            let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
+            assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
         }
-        let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
-        assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs());
+    }
+
+    /// An aggregate that cannot rotate (a lone block, blocks on a line)
+    /// still factors, and its rotations add nothing to `z`.
+    #[test]
+    fn aggregates_that_cannot_rotate_still_factor() {
+        for (nx, ny, nz) in [(1, 1, 1), (5, 1, 1)] {
+            let (pattern, values) = grid(nx, ny, nz);
+            let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
+            let mut coarse = CoarseSpace::new(&blocks, 1);
+            let line: Vec<[f64; 3]> = (0..nx).map(|x| [x as f64, 0.0, 0.0]).collect();
+            coarse.set_positions(&line);
+            coarse.factor(&blocks, &values).unwrap();
+            let r: Vec<f64> = (0..3 * nx).map(|i| 1.0 + i as f64).collect();
+            let mut z = vec![0.0; 3 * nx];
+            coarse.correct(&r, &mut z);
+            assert!(z.iter().all(|v| v.is_finite()), "{nx} blocks on a line: {z:?}");
+            if nx == 1 {
+                // a lone block's correction is its translations' alone
+                let mut translations = CoarseSpace::new(&blocks, 1);
+                translations.factor(&blocks, &values).unwrap();
+                let mut expected = vec![0.0; 3];
+                translations.correct(&r, &mut expected);
+                for (a, b) in z.iter().zip(&expected) {
+                    assert!((a - b).abs() <= 1e-12 * b.abs(), "a lone block: {z:?} vs {expected:?}");
+                }
+            }
+        }
     }
 }

@@ -86,6 +86,10 @@ pub trait LinearSolver: Send + Sync {
     /// Takes the rotation (row-major) of every 3x3 block for the coming
     /// solves; ignored by default.
     fn set_frames(&mut self, _frames: &[[f64; 9]]) {}
+    /// Takes the position (m) of every 3x3 block, where blocks are nodes,
+    /// for the coming factor and solves (a preconditioner may build rigid
+    /// motions from them); ignored by default.
+    fn set_positions(&mut self, _positions: &[[f64; 3]]) {}
 }
 
 /// The solvers a simulation can use.
@@ -106,7 +110,7 @@ pub enum SolverKind {
     /// of [`SolverKind::Cholesky`], to compare against).
     SparseCholesky,
     /// Conjugate gradients preconditioned by block Jacobi plus a coarse
-    /// correction (the translations of aggregates of nodes),
+    /// correction (the rigid motions of aggregates of nodes),
     /// warm-started.
     Cg,
     /// Conjugate gradients preconditioned by the Cholesky factor of the
