@@ -85,40 +85,35 @@ impl CoarseSpace {
     /// `max_aggregates` remain (or a round merges nothing).
     pub fn new(blocks: &BlockStructure, max_aggregates: usize) -> Self {
         let n = blocks.ptr.len() - 1;
-        let (mut ptr, mut adj) = (blocks.ptr.clone(), blocks.rows.clone());
         let mut of: Vec<u32> = (0..n as u32).collect();
-        let mut count = n;
+        let (mut count, mut graph) = (n, None::<(Vec<u32>, Vec<u32>)>);
         while count > max_aggregates.max(1) {
-            let (round, merged) = aggregate(&ptr, &adj);
+            let (ptr, adj) = graph.as_ref().map_or((&blocks.ptr[..], &blocks.rows[..]), |(p, a)| (&p[..], &a[..]));
+            let (round, merged) = aggregate(ptr, adj);
             if merged == count {
                 break;
             }
-            of.iter_mut().for_each(|a| *a = round[*a as usize]);
-            (ptr, adj) = quotient(&ptr, &adj, &round, merged);
+            of.par_iter_mut().for_each(|a| *a = round[*a as usize]);
+            graph = Some(quotient(ptr, adj, &round, merged));
             count = merged;
         }
-        let mut ptr = vec![0u32; count + 1];
-        of.iter().for_each(|&a| ptr[a as usize + 1] += 1);
-        (0..count).for_each(|a| ptr[a + 1] += ptr[a]);
-        let mut fill = ptr.clone();
-        let mut members = vec![0u32; n];
-        for (i, &a) in of.iter().enumerate() {
-            members[fill[a as usize] as usize] = i as u32;
-            fill[a as usize] += 1;
+        let (ptr, members) = group(&of, count);
+        // runs are counted, then listed, column by column in parallel (and
+        // in order)
+        let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+        let counts: Vec<u32> = (0..n).into_par_iter().map(|j| run_ends(column_rows(j), &of).count() as u32).collect();
+        let mut run_ptr = Vec::with_capacity(n + 1);
+        run_ptr.push(0u32);
+        for c in counts {
+            run_ptr.push(run_ptr.last().expect("starts with 0") + c);
         }
-        let (mut run_ptr, mut run_end, mut run_aggregate) = (vec![0u32], Vec::new(), Vec::new());
-        for j in 0..n {
-            let rows = &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-            for (p, &i) in rows.iter().enumerate() {
-                let a = of[i as usize];
-                if p == 0 || run_aggregate.last() != Some(&a) {
-                    run_aggregate.push(a);
-                    run_end.push(0);
-                }
-                *run_end.last_mut().expect("pushed") = p as u32 + 1;
-            }
-            run_ptr.push(run_end.len() as u32);
-        }
+        let (run_end, run_aggregate): (Vec<u32>, Vec<u32>) = (0..n)
+            .into_par_iter()
+            .flat_map_iter(|j| {
+                let (rows, of) = (column_rows(j), &of);
+                run_ends(rows, of).map(move |p| (p as u32 + 1, of[rows[p] as usize]))
+            })
+            .unzip();
         let run_sums = vec![[0.0; 18]; run_end.len()];
         CoarseSpace { of, ptr, members, run_ptr, run_end, run_aggregate, run_sums, ..Default::default() }
     }
@@ -377,13 +372,13 @@ fn aggregate(ptr: &[u32], adj: &[u32]) -> (Vec<u32>, usize) {
 /// The graph of the aggregates `of` (`count` of them): two aggregates are
 /// neighbours when any of their vertices are.
 fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Vec<u32>) {
-    let mut vertices: Vec<Vec<u32>> = vec![Vec::new(); count];
-    of.iter().enumerate().for_each(|(v, &a)| vertices[a as usize].push(v as u32));
-    let (mut out_ptr, mut out_adj) = (vec![0u32], Vec::new());
+    let (vertex_ptr, vertices) = group(of, count);
+    let (mut out_ptr, mut out_adj) = (Vec::with_capacity(count + 1), Vec::new());
+    out_ptr.push(0u32);
     let mut seen = vec![FREE; count];
-    for (a, vs) in vertices.iter().enumerate() {
+    for a in 0..count {
         let start = out_adj.len();
-        for &v in vs {
+        for &v in &vertices[vertex_ptr[a] as usize..vertex_ptr[a + 1] as usize] {
             for &u in &adj[ptr[v as usize] as usize..ptr[v as usize + 1] as usize] {
                 let b = of[u as usize];
                 if seen[b as usize] != a as u32 {
@@ -396,6 +391,28 @@ fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Ve
         out_ptr.push(out_adj.len() as u32);
     }
     (out_ptr, out_adj)
+}
+
+/// The positions `p` of `rows` where a run of rows of one aggregate (by
+/// `of`) ends: the last row, and every row whose successor lies in another
+/// aggregate.
+fn run_ends<'a>(rows: &'a [u32], of: &'a [u32]) -> impl Iterator<Item = usize> + 'a {
+    (0..rows.len()).filter(move |&p| p + 1 == rows.len() || of[rows[p + 1] as usize] != of[rows[p] as usize])
+}
+
+/// The vertices of each group of `of` (`count` groups), ascending: group
+/// `a`'s at `members[ptr[a]..ptr[a + 1]]`.
+fn group(of: &[u32], count: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut ptr = vec![0u32; count + 1];
+    of.iter().for_each(|&a| ptr[a as usize + 1] += 1);
+    (0..count).for_each(|a| ptr[a + 1] += ptr[a]);
+    let mut fill = ptr.clone();
+    let mut members = vec![0u32; of.len()];
+    for (i, &a) in of.iter().enumerate() {
+        members[fill[a as usize] as usize] = i as u32;
+        fill[a as usize] += 1;
+    }
+    (ptr, members)
 }
 
 #[cfg(test)]
