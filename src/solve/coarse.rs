@@ -207,8 +207,11 @@ impl CoarseSpace {
                 (3..6).for_each(|r| dense[(6 * a + r) * (m + 1)] += 1e-12 * largest);
             }
         }
+        // (scratch for six modes, whichever this factor has: positions may
+        // come after the first factor)
+        let most = 6 * self.aggregates();
         let stack = self.stack.get_or_insert_with(|| {
-            MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(m, Par::Seq, Default::default()))
+            MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(most, Par::Seq, Default::default()))
         });
         let result = llt::factor::cholesky_in_place(
             MatMut::from_column_major_slice_mut(&mut dense, m, m),
@@ -536,6 +539,8 @@ mod tests {
         for rotations in [false, true] {
             let mut coarse = CoarseSpace::new(&blocks, 12);
             if rotations {
+                // positions may come after a first factor of translations
+                coarse.factor(&blocks, &values).unwrap();
                 coarse.set_positions(&lattice(nx, ny, nz));
             }
             let k = if rotations { 6 } else { 3 };
