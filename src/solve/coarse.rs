@@ -18,6 +18,7 @@
 //! a cut body. Every sum runs in a fixed order, so the correction has the
 //! same bits on any number of threads.
 
+use cleave_kernels::vec3::cross;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
 use faer::{MatMut, MatRef, Par};
@@ -332,11 +333,6 @@ impl CoarseSpace {
         });
         self.restricted.iter().zip(correction).map(|(r, e)| r * e).sum()
     }
-}
-
-/// `a × b`.
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 /// The unit vector along axis `c`.
