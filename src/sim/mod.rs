@@ -127,11 +127,11 @@ pub struct Simulation {
     /// Cuts run again with one more element kept whole (see
     /// [`CUT_ATTEMPTS`]).
     cut_retries: usize,
-    /// An upper bound of the element diameters of the mesh (m), found on
-    /// the first cut and raised by every change after it: how far from a
-    /// cut's plane the elements it looks at can lie.
+    /// For every node, an upper bound of the diameters of the elements
+    /// holding it (m), found on the first cut and raised by every change
+    /// after it: how far from a cut the elements it looks at can lie.
     #[serde(skip)]
-    max_diameter: Option<f64>,
+    node_diameters: Option<Vec<f64>>,
     /// Faces a DG cut integrated again (the others kept their moments).
     faces_integrated: usize,
     /// How many times each element's ancestors were refined (elements a
@@ -245,7 +245,7 @@ impl Simulation {
             steps: 0,
             part_floor,
             cut_retries: 0,
-            max_diameter: None,
+            node_diameters: None,
             faces_integrated: 0,
             refine_levels: Vec::new(),
             timings,

@@ -5,8 +5,8 @@
 
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
-    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, cut_reach, momenta, open_pinched_nodes,
-    pinched_nodes, polygon_plane, CutReport, CutScope, NodeOrigins, PolygonCutReport, Rollback, SplitOptions,
+    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, node_diameters, open_pinched_nodes,
+    pinched_nodes, polygon_plane, CutReport, CutScope, NodeOrigins, PolygonCutReport, Reach, Rollback, SplitOptions, raise_node_diameters,
 };
 use crate::Error;
 
@@ -26,7 +26,7 @@ impl Simulation {
             let cut = cut_by_plane_keeping(mesh, plane, &opts, keep, scope)?;
             Ok(PolygonCutReport { cut, pocket: None })
         };
-        self.cut(plane, cut).map(|report| report.cut)
+        self.cut(plane, None, cut).map(|report| report.cut)
     }
 
     /// Cuts the body with a convex planar polygon given in the rest frame
@@ -36,7 +36,10 @@ impl Simulation {
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
         let plane = polygon_plane(polygon)?;
         let opts = self.cut_options();
-        self.cut(&plane, |mesh, keep, scope| Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep, scope)?))
+        let cut = |mesh: &mut PolyMesh, keep: &[u32], scope: CutScope| -> Result<PolygonCutReport, Error> {
+            Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep, scope)?)
+        };
+        self.cut(&plane, Some(polygon), cut)
     }
 
     /// The split options of a cut: the parameters' with their
@@ -47,31 +50,38 @@ impl Simulation {
         SplitOptions { min_diameter: opts.min_diameter.max(self.part_floor), ..opts }
     }
 
-    /// The elements a cut along `plane` must look at (see [`CutScope`]):
-    /// for the nodal families, every element the pattern lists at a node
-    /// within [`cut_reach`] of the plane, in increasing order; `None` (the
-    /// whole mesh) for the discontinuous Galerkin family, whose pattern's
-    /// blocks are not nodes, or a plane that is not a number.
-    fn cut_scope(&mut self, plane: &Plane) -> Option<Vec<u32>> {
+    /// The elements a cut along `plane` (and, for a polygon cut, within
+    /// reach of `polygon`) must look at (see [`CutScope`]): for the nodal
+    /// families, every element the pattern lists at a node in the cut's
+    /// [`Reach`], in increasing order; `None` (the whole mesh) for the
+    /// discontinuous Galerkin family, whose pattern's blocks are not nodes,
+    /// or a plane that is not a number.
+    fn cut_scope(&mut self, plane: &Plane, polygon: Option<&[[f64; 3]]>) -> Option<Vec<u32>> {
         let Model::Nodal(_) = &self.elements else { return None };
         let mesh = &self.mesh;
-        let max_diameter = *self
-            .max_diameter
-            .get_or_insert_with(|| (0..mesh.elements.len()).map(|e| mesh.element_diameter(e)).fold(0.0, f64::max));
-        let reach = cut_reach(mesh, max_diameter);
-        let dist = plane.distances(&mesh.nodes);
-        if dist.iter().any(|d| d.is_nan()) || self.pattern.num_blocks != dist.len() {
+        if self.node_diameters.as_ref().is_none_or(|d| d.len() != mesh.nodes.len()) {
+            self.node_diameters = Some(node_diameters(mesh));
+        }
+        let diameters = self.node_diameters.as_deref()?;
+        let reach = match polygon {
+            Some(polygon) => Reach::of_polygon(mesh, plane, polygon),
+            None => Reach::of_plane(mesh, plane),
+        };
+        if !(plane.check().is_ok() && self.pattern.num_blocks == mesh.nodes.len()) {
             return None;
         }
-        let mut listed: Vec<u32> =
-            (0..dist.len()).filter(|&v| dist[v].abs() <= reach).flat_map(|v| self.pattern.elements_at(v)).collect();
+        let mut listed: Vec<u32> = (0..mesh.nodes.len())
+            .filter(|&v| reach.contains(mesh.nodes[v], diameters[v]))
+            .flat_map(|v| self.pattern.elements_at(v))
+            .collect();
         listed.sort_unstable();
         listed.dedup();
         Some(listed)
     }
 
-    /// Runs `cut` (a cut along `plane`, leaving the elements it is given
-    /// whole, looking at the elements in scope) on the mesh in place and
+    /// Runs `cut` (a cut along `plane`, or along `polygon` in it, leaving
+    /// the elements it is given whole, looking at the elements in scope)
+    /// on the mesh in place and
     /// brings everything else up to date.
     /// When the element store finds an element the cut made or changed
     /// unhealthy (see [`crate::store::HealthFloors`]), the cut is undone
@@ -80,6 +90,7 @@ impl Simulation {
     fn cut(
         &mut self,
         plane: &Plane,
+        polygon: Option<&[[f64; 3]]>,
         cut: impl Fn(&mut PolyMesh, &[u32], CutScope) -> Result<PolygonCutReport, Error>,
     ) -> Result<PolygonCutReport, Error> {
         let t = std::time::Instant::now();
@@ -87,7 +98,7 @@ impl Simulation {
         let before = rebuild(&self.timings);
         let mut keep_whole: Vec<u32> = Vec::new();
         // (every attempt starts from the same mesh: the scope holds for all)
-        let listed = self.cut_scope(plane);
+        let listed = self.cut_scope(plane, polygon);
         let result = loop {
             let scope = listed.as_deref().map_or(CutScope::whole(), |l| CutScope::listed(&self.mesh, l));
             let rollback = Rollback::around_plane(&self.mesh, plane, scope);
@@ -161,8 +172,8 @@ impl Simulation {
         let t = std::time::Instant::now();
         let changes = store.update(mesh, &self.params.material, &self.params.basis, touched, &parents)?;
         self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
-        if let Some(max) = &mut self.max_diameter {
-            *max = touched.iter().map(|&e| mesh.element_diameter(e as usize)).fold(*max, f64::max);
+        if let Some(diameters) = &mut self.node_diameters {
+            raise_node_diameters(mesh, touched.iter().map(|&e| e as usize), diameters);
         }
         // the nodes whose mass changes: those of the touched elements,
         // before and after

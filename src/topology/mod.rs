@@ -16,7 +16,7 @@ pub use cut::{cut_by_plane, cut_by_plane_keeping, CutReport};
 pub use pinch::{open_pinched_nodes, pinched_nodes};
 pub use polygon::{cut_by_polygon, cut_by_polygon_keeping, polygon_plane, PolygonCutReport};
 pub use rollback::Rollback;
-pub use scope::{cut_reach, CutScope};
+pub use scope::{node_diameters, raise_node_diameters, CutScope, Reach};
 pub use sliver::{merge_slivers, SliverReport};
 pub(crate) use split::classify_split;
 pub use split::{split_by_plane, split_elements_by_plane, NewNode, SplitError, SplitOptions, SplitReport};

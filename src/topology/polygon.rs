@@ -3,9 +3,9 @@
 //! 1. The elements that the polygon's plane crosses and whose section
 //!    overlaps the polygon are split locally (their neighbours repaired).
 //! 2. The faces in the plane (the caps, and interior faces that already lay
-//!    in it) are split along the lines of the polygon's edges, so each lies
-//!    inside or outside the polygon; the new nodes join every face on their
-//!    edge.
+//!    in it and meet the polygon) are split along the lines of the
+//!    polygon's edges, so each lies inside or outside the polygon; the new
+//!    nodes join every face on their edge.
 //! 3. Nodes strictly inside the polygon are duplicated and the faces inside
 //!    it separated ([`super::cut`]'s separation): the material opens only
 //!    where it was cut. Where no node lies inside, a node at the polygon's
@@ -222,9 +222,19 @@ pub fn cut_by_polygon_keeping(
     let on_plane = |mesh: &PolyMesh, v: u32| {
         v >= first_new || split.on_plane.binary_search(&v).is_ok() || dist(mesh.nodes[v as usize]).abs() <= band
     };
+    // (a face in the plane that does not meet the polygon has nothing to
+    // open, nor any reason to be split along its edges' lines)
+    let meets_polygon = |mesh: &PolyMesh, lp: &[u32]| {
+        let loop2: Vec<[f64; 2]> = lp.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
+        convex_overlap(&loop2, &outline)
+    };
     for &f in &region_faces {
         let face = &mesh.faces[f as usize];
-        if !listed[f as usize] && users[&f].len() == 2 && face.vertices.iter().all(|&v| on_plane(mesh, v)) {
+        if !listed[f as usize]
+            && users[&f].len() == 2
+            && face.vertices.iter().all(|&v| on_plane(mesh, v))
+            && meets_polygon(mesh, &face.vertices)
+        {
             listed[f as usize] = true;
             in_plane.push(f);
         }

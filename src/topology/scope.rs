@@ -5,15 +5,27 @@
 //! list each). A caller that knows which elements hold each node (the
 //! simulation does: its sparse pattern lists them) can name a superset
 //! instead, [`CutScope::listed`], and every search of the cut then visits
-//! only those, plus the elements the cut appends. The listed elements
-//! must be every element holding a node within [`cut_reach`] of the plane:
-//! every element a cut splits, repairs, keeps whole, saves for its rollback
-//! or separates holds such a node (its nodes lie within its diameter of
-//! the plane, or of an element that reaches the plane's rounding band), so
-//! the cut is the same as over the whole mesh.
+//! only those, plus the elements the cut appends.
+//!
+//! The listed elements must be every element holding a node in the cut's
+//! [`Reach`]: a node whose distance from the plane, and for a polygon from
+//! the polygon's bounding box, is at most the largest diameter of the
+//! elements holding it (plus the plane's rounding band; an upper bound of
+//! those diameters will do, see [`node_diameters`]). Every element a cut
+//! splits, repairs, keeps whole, saves for its rollback or separates holds
+//! such a node:
+//! - an element that straddles the plane or reaches its rounding band has
+//!   every node within its own diameter (plus the band) of the plane, and a
+//!   neighbour sharing a node with it holds that node;
+//! - a polygon's cut changes only elements whose section meets the polygon
+//!   (every node within its diameter of the polygon), their neighbours
+//!   across crossed edges, the users of faces in the plane that meet the
+//!   polygon and the elements holding nodes inside it.
+//!
+//! So the cut is the same as over the whole mesh.
 
 use super::split::on_plane_band;
-use crate::mesh::PolyMesh;
+use crate::mesh::{Plane, PolyMesh};
 
 /// The elements a cut looks at: the whole mesh, or a sorted list made
 /// before the cut together with every element appended since.
@@ -32,8 +44,8 @@ impl<'a> CutScope<'a> {
     }
 
     /// The sorted `listed` elements of `mesh`, which must include every
-    /// element holding a node within [`cut_reach`] of the cut's plane, and
-    /// the elements appended to `mesh` from now on.
+    /// element holding a node in the cut's [`Reach`], and the elements
+    /// appended to `mesh` from now on.
     pub fn listed(mesh: &PolyMesh, listed: &'a [u32]) -> Self {
         debug_assert!(listed.windows(2).all(|w| w[0] < w[1]), "listed elements sorted and distinct");
         CutScope { listed: Some(listed), appended: mesh.elements.len() }
@@ -50,12 +62,74 @@ impl<'a> CutScope<'a> {
     }
 }
 
-/// The distance (m) from a cut's plane within which a node's elements must
-/// be listed in a [`CutScope`]: the largest element diameter of `mesh`
-/// (`max_diameter`, m) plus the plane's rounding band, with a margin of a
-/// hundredth for rounding.
-pub fn cut_reach(mesh: &PolyMesh, max_diameter: f64) -> f64 {
-    1.01 * (max_diameter + on_plane_band(mesh))
+/// For every node of `mesh`, the largest diameter of the elements holding
+/// it (m; 0 for a node no element holds).
+pub fn node_diameters(mesh: &PolyMesh) -> Vec<f64> {
+    let mut out = vec![0.0; mesh.nodes.len()];
+    raise_node_diameters(mesh, 0..mesh.elements.len(), &mut out);
+    out
+}
+
+/// Raises `diameters` (see [`node_diameters`]) to the diameters of the
+/// `elements` of `mesh` (after they changed), growing it to the mesh's
+/// node count: an upper bound stays one.
+pub fn raise_node_diameters(mesh: &PolyMesh, elements: impl IntoIterator<Item = usize>, diameters: &mut Vec<f64>) {
+    diameters.resize(mesh.nodes.len(), 0.0);
+    for e in elements {
+        let d = mesh.element_diameter(e);
+        for &v in &mesh.elements[e].nodes {
+            diameters[v as usize] = diameters[v as usize].max(d);
+        }
+    }
+}
+
+/// The nodes whose elements a [`CutScope`] must list (see the module
+/// docs): those within reach of the cut's plane and, for a polygon, of
+/// the polygon's bounding box, the reach of a node being the largest
+/// diameter of the elements holding it plus the plane's rounding band,
+/// with a margin of a hundredth for rounding.
+#[derive(Clone, Copy, Debug)]
+pub struct Reach {
+    plane: Plane,
+    /// The rounding band of the plane (m, [`on_plane_band`]).
+    band: f64,
+    /// The polygon's bounding box (m), if any.
+    bounds: Option<([f64; 3], [f64; 3])>,
+}
+
+impl Reach {
+    /// The reach of a cut of `mesh` along the whole `plane`.
+    pub fn of_plane(mesh: &PolyMesh, plane: &Plane) -> Self {
+        Reach { plane: *plane, band: on_plane_band(mesh), bounds: None }
+    }
+
+    /// The reach of a cut of `mesh` with `polygon`, which lies in `plane`.
+    pub fn of_polygon(mesh: &PolyMesh, plane: &Plane, polygon: &[[f64; 3]]) -> Self {
+        let bounds = polygon.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), p| {
+            (std::array::from_fn(|k| lo[k].min(p[k])), std::array::from_fn(|k| hi[k].max(p[k])))
+        });
+        Reach { bounds: Some(bounds), ..Self::of_plane(mesh, plane) }
+    }
+
+    /// Whether a node at `x` held by elements no larger than `diameter`
+    /// (m) is in reach (never for a position that is not a number).
+    pub fn contains(&self, x: [f64; 3], diameter: f64) -> bool {
+        let r = 1.01 * (diameter + self.band);
+        let in_slab = self.plane.distance(x).abs() <= r;
+        in_slab && self.bounds.is_none_or(|(lo, hi)| (0..3).all(|k| lo[k] - r <= x[k] && x[k] <= hi[k] + r))
+    }
+
+    /// The elements of `mesh` holding a node in reach, in increasing order,
+    /// by a pass over the whole mesh (for callers without a node-to-element
+    /// map); `diameters` as [`node_diameters`] gives them.
+    pub fn elements(&self, mesh: &PolyMesh, diameters: &[f64]) -> Vec<u32> {
+        // (a node past `diameters` is taken to be in reach)
+        let diameter = |v: usize| diameters.get(v).copied().unwrap_or(f64::INFINITY);
+        let inside: Vec<bool> = mesh.nodes.iter().enumerate().map(|(v, &x)| self.contains(x, diameter(v))).collect();
+        (0..mesh.elements.len() as u32)
+            .filter(|&e| mesh.elements[e as usize].nodes.iter().any(|&v| inside[v as usize]))
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -76,5 +150,32 @@ mod tests {
         mesh.elements.truncate(n - 1);
         assert_eq!(scope.elements(&mesh).collect::<Vec<_>>(), vec![1, 3]);
         assert_eq!(CutScope::whole().elements(&mesh).count(), n - 1);
+    }
+
+    #[test]
+    fn a_polygon_reaches_only_the_elements_near_it() {
+        // 10 x 10 x 10 cells of 0.1 m: the diameter of every tetrahedron is
+        // the cell's diagonal, about 0.173 m
+        let mesh = box_tet([0.0; 3], [1.0; 3], [10, 10, 10]).unwrap();
+        let diameters = node_diameters(&mesh);
+        assert!(diameters.iter().all(|&d| (d - 0.1 * 3f64.sqrt()).abs() < 1e-12));
+        let plane = Plane { point: [0.55, 0.0, 0.0], normal: [1.0, 0.0, 0.0] };
+        let square = [[0.55, 0.0, 0.0], [0.55, 0.2, 0.0], [0.55, 0.2, 0.2], [0.55, 0.0, 0.2]];
+        let (slab, near) = (Reach::of_plane(&mesh, &plane), Reach::of_polygon(&mesh, &plane, &square));
+        let d = diameters[0];
+        // in reach: within a diameter of the plane, and of the polygon's box
+        assert!(slab.contains([0.55 + 0.99 * d, 0.9, 0.9], d) && !slab.contains([0.55 + 1.1 * d, 0.5, 0.5], d));
+        assert!(near.contains([0.55, 0.2 + 0.99 * d, 0.1], d) && !near.contains([0.55, 0.2 + 1.1 * d, 0.1], d));
+        assert!(!near.contains([f64::NAN; 3], d));
+        let (slab, near) = (slab.elements(&mesh, &diameters), near.elements(&mesh, &diameters));
+        // every element meeting the polygon, fewer than the plane's slab holds
+        assert!(near.iter().all(|e| slab.binary_search(e).is_ok()));
+        assert!(4 * near.len() < slab.len(), "{} of {}", near.len(), slab.len());
+        let meets = |e: usize| {
+            let x = mesh.elements[e].nodes.iter().map(|&v| mesh.nodes[v as usize]);
+            x.clone().any(|p| p[0] < 0.55) && x.clone().any(|p| p[0] > 0.55) && x.clone().all(|p| p[1] < 0.3 && p[2] < 0.3)
+        };
+        let missing: Vec<usize> = (0..mesh.elements.len()).filter(|&e| meets(e) && near.binary_search(&(e as u32)).is_err()).collect();
+        assert!(missing.is_empty(), "{missing:?}");
     }
 }

@@ -198,8 +198,9 @@ pub(crate) struct Classification {
     /// Side of every node: `0` on the plane (snapped), else the sign of its
     /// distance.
     pub side: Vec<i8>,
-    /// Elements with nodes strictly on both sides of the plane, in
-    /// increasing order: the only ones a split can change.
+    /// Elements with nodes strictly on both sides of the plane (when only
+    /// some elements may be split, those sharing a node with one of them),
+    /// in increasing order: the only ones a split can change.
     pub straddling: Vec<usize>,
     /// Elements to split, in increasing order.
     pub crossed: Vec<usize>,
@@ -248,13 +249,22 @@ pub(crate) fn classify(
             *c = true;
         }
     }
-    let straddling: Vec<usize> = scope
+    let mut straddling: Vec<usize> = scope
         .elements(mesh)
         .filter(|&e| {
             let d = mesh.elements[e].nodes.iter().map(|&v| dist[v as usize]);
             d.clone().any(|x| x > 0.0) && d.clone().any(|x| x < 0.0)
         })
         .collect();
+    if let Some(only) = only {
+        // elements sharing no node with one that may be split change in
+        // nothing, nor do their snapped nodes matter
+        let mut near = vec![false; mesh.nodes.len()];
+        for &e in only.iter().filter(|&&e| (e as usize) < mesh.elements.len()) {
+            mesh.elements[e as usize].nodes.iter().for_each(|&v| near[v as usize] = true);
+        }
+        straddling.retain(|&e| mesh.elements[e].nodes.iter().any(|&v| near[v as usize]));
+    }
     // snapping radius of each node: `snap` times the smallest straddling
     // element holding it
     let mut radius: HashMap<u32, f64> = HashMap::default();
