@@ -132,16 +132,25 @@ struct Buffers {
 }
 
 impl Buffers {
-    /// Empty arrays with room for `entries`, `incidences` and `slots`.
+    /// The arrays with room for `entries`, `incidences` and `slots`. Their
+    /// old contents stay: [`SparsePattern::lay_out`] overwrites every value
+    /// it keeps, so resizing them writes only what they grow by (not a
+    /// fill of the whole arrays before the copy).
     fn with_room(mut self, entries: usize, incidences: usize, slots: usize) -> Self {
-        self.row_idx.clear();
-        self.row_idx.reserve(entries);
+        room_for(&mut self.row_idx, entries);
         self.col_ptr.clear();
-        self.incidences.clear();
-        self.incidences.reserve(incidences);
-        self.slots.clear();
-        self.slots.reserve(slots);
+        room_for(&mut self.incidences, incidences);
+        room_for(&mut self.slots, slots);
         self
+    }
+}
+
+/// Gives `array` a capacity of at least `len`, emptying it first if it has
+/// to grow (so that growing copies nothing).
+fn room_for<T>(array: &mut Vec<T>, len: usize) {
+    if array.capacity() < len {
+        array.clear();
+        array.reserve(len);
     }
 }
 
