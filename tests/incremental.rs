@@ -10,10 +10,11 @@ use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
 use cleave::meshing::box_tet;
 use cleave::sim::{Simulation, SimulationParams};
+use cleave::solve::BlockStructure;
 use cleave::store::{BasisOptions, ElementStore, HealthFloors};
 use cleave::topology::{
-    cut_by_plane, cut_by_plane_keeping, cut_by_polygon, cut_by_polygon_keeping, node_diameters, polygon_plane, CutReport,
-    CutScope, Reach, Rollback, SplitOptions,
+    cut_by_plane, cut_by_plane_keeping, cut_by_polygon, cut_by_polygon_keeping, node_diameters, polygon_plane,
+    CutReport, CutScope, Reach, Rollback, SplitOptions,
 };
 use proptest::prelude::*;
 
@@ -81,6 +82,9 @@ impl System {
         }
         assert_eq!(self.pattern.symbolic.col_ptr(), fresh.pattern.symbolic.col_ptr());
         assert_eq!(self.pattern.symbolic.row_idx(), fresh.pattern.symbolic.row_idx());
+        // the block structure kept with the pattern is the one its scalar rows hold
+        let read = BlockStructure::new(self.pattern.symbolic.as_ref()).unwrap();
+        assert_eq!(self.pattern.blocks(), &read);
         let (a, b) = (self.matrix(), fresh.matrix());
         let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (p, (x, y)) in a.iter().zip(&b).enumerate() {

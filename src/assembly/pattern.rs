@@ -4,6 +4,8 @@
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use rayon::prelude::*;
 
+use crate::solve::BlockStructure;
+
 use super::{Couplings, MAX_ENTRY_BLOCKS};
 
 /// One element touching a node: where the node sits in it, and where the
@@ -37,6 +39,8 @@ pub struct SparsePattern {
     pub num_blocks: usize,
     /// The scalar compressed-column structure (`3 * num_blocks` square).
     pub symbolic: SymbolicSparseColMat<usize>,
+    /// The same structure in 3x3 blocks (what block solvers read).
+    blocks: BlockStructure,
     /// Scalar offset between consecutive columns of block column `j`.
     col_stride: Vec<usize>,
     /// CSR offsets into `incidences`, one row per node.
@@ -109,9 +113,12 @@ impl<'de> serde::Deserialize<'de> for SparsePattern {
         if !(columns_ok && nodes_ok) {
             return Err(serde::de::Error::custom("the sparse pattern's arrays are inconsistent"));
         }
+        let symbolic = SymbolicSparseColMat::new_checked(n, n, s.col_ptr, None, s.row_idx);
+        let blocks = BlockStructure::new(symbolic.as_ref()).map_err(serde::de::Error::custom)?;
         Ok(SparsePattern {
             num_blocks: s.num_blocks,
-            symbolic: SymbolicSparseColMat::new_checked(n, n, s.col_ptr, None, s.row_idx),
+            symbolic,
+            blocks,
             col_stride: s.col_stride,
             offsets: s.offsets,
             incidences: s.incidences,
@@ -127,6 +134,7 @@ impl<'de> serde::Deserialize<'de> for SparsePattern {
 struct Buffers {
     col_ptr: Vec<usize>,
     row_idx: Vec<usize>,
+    block_rows: Vec<u32>,
     incidences: Vec<Incidence>,
     slots: Vec<u32>,
 }
@@ -138,6 +146,7 @@ impl Buffers {
     /// fill of the whole arrays before the copy).
     fn with_room(mut self, entries: usize, incidences: usize, slots: usize) -> Self {
         room_for(&mut self.row_idx, entries);
+        room_for(&mut self.block_rows, entries / 9);
         self.col_ptr.clear();
         room_for(&mut self.incidences, incidences);
         room_for(&mut self.slots, slots);
@@ -220,6 +229,7 @@ impl SparsePattern {
         SparsePattern {
             num_blocks: 0,
             symbolic: SymbolicSparseColMat::new_checked(0, 0, vec![0], None, Vec::new()),
+            blocks: BlockStructure::default(),
             col_stride: Vec::new(),
             offsets: vec![0],
             incidences: Vec::new(),
@@ -279,7 +289,8 @@ impl SparsePattern {
         let new = Self::lay_out(store, columns, buffers);
         let old = std::mem::replace(self, new);
         let (_, _, col_ptr, _, row_idx) = old.symbolic.into_parts();
-        self.spare = Buffers { col_ptr, row_idx, incidences: old.incidences, slots: old.slots };
+        let block_rows = old.blocks.into_rows();
+        self.spare = Buffers { col_ptr, row_idx, block_rows, incidences: old.incidences, slots: old.slots };
     }
 
     /// The ids of the entries (elements) coupling block `j`, in the
@@ -325,7 +336,8 @@ impl SparsePattern {
         // starts in its array
         let (mut col_stride, mut diagonal) = (Vec::with_capacity(num_blocks), Vec::with_capacity(num_blocks));
         let mut starts = Vec::with_capacity(num_blocks + 1);
-        let mut at = [0usize; 3];
+        // (entries, incidences, slots, block rows)
+        let mut at = [0usize; 4];
         for (j, col) in columns.iter().enumerate() {
             starts.push(at);
             let (stride, incidences, slots) = match col {
@@ -347,41 +359,47 @@ impl SparsePattern {
             at[0] += 3 * stride;
             at[1] += incidences;
             at[2] += slots;
+            at[3] += stride / 3;
         }
         starts.push(at);
         let n = 3 * num_blocks;
-        let Buffers { mut col_ptr, mut row_idx, mut incidences, mut slots } = buffers;
+        let Buffers { mut col_ptr, mut row_idx, mut block_rows, mut incidences, mut slots } = buffers;
         col_ptr.extend((0..n).map(|c| starts[c / 3][0] + (c % 3) * col_stride[c / 3]));
         col_ptr.push(at[0]);
         let offsets: Vec<u32> =
             starts.iter().map(|s| u32::try_from(s[1]).expect("fewer than 2^32 incidences")).collect();
         let unset = Incidence { batch: 0, element: 0, id: 0, local: 0, size: 0, slots: 0 };
         row_idx.resize(at[0], 0);
+        block_rows.resize(at[3], 0);
         incidences.resize(at[1], unset);
         slots.resize(at[2], 0);
         // the arrays cut into the stretches of runs of columns
         let mut runs = Vec::with_capacity(num_blocks.div_ceil(LAY_OUT_RUN));
         let (mut row_rest, mut inc_rest, mut slot_rest) = (&mut row_idx[..], &mut incidences[..], &mut slots[..]);
+        let mut block_rest = &mut block_rows[..];
         for first in (0..num_blocks).step_by(LAY_OUT_RUN) {
             let last = (first + LAY_OUT_RUN).min(num_blocks);
             let len = |k: usize| starts[last][k] - starts[first][k];
             let (r, rr) = std::mem::take(&mut row_rest).split_at_mut(len(0));
             let (i, ir) = std::mem::take(&mut inc_rest).split_at_mut(len(1));
             let (s, sr) = std::mem::take(&mut slot_rest).split_at_mut(len(2));
-            (row_rest, inc_rest, slot_rest) = (rr, ir, sr);
-            runs.push((first..last, r, i, s));
+            let (b, br) = std::mem::take(&mut block_rest).split_at_mut(len(3));
+            (row_rest, inc_rest, slot_rest, block_rest) = (rr, ir, sr, br);
+            runs.push((first..last, r, i, s, b));
         }
-        runs.into_par_iter().for_each(|(range, row_out, inc_out, slot_out)| {
+        runs.into_par_iter().for_each(|(range, row_out, inc_out, slot_out, block_out)| {
             let base = starts[range.start];
             for j in range {
-                let [e0, i0, s0] = std::array::from_fn(|k| starts[j][k] - base[k]);
-                let [e1, i1, s1] = std::array::from_fn(|k| starts[j + 1][k] - base[k]);
+                let [e0, i0, s0, b0] = std::array::from_fn(|k| starts[j][k] - base[k]);
+                let [e1, i1, s1, b1] = std::array::from_fn(|k| starts[j + 1][k] - base[k]);
                 let (row_out, inc_out, slot_out) = (&mut row_out[e0..e1], &mut inc_out[i0..i1], &mut slot_out[s0..s1]);
+                let block_out = &mut block_out[b0..b1];
                 let mut slot = starts[j][2];
                 match &columns[j] {
                     Column::Kept(old) => {
                         let old_col = old.symbolic.col_ptr();
                         row_out.copy_from_slice(&old.symbolic.row_idx()[old_col[3 * j]..old_col[3 * j + 3]]);
+                        block_out.copy_from_slice(old.blocks.column_rows(j));
                         let mut written = 0;
                         for (out, inc) in inc_out.iter_mut().zip(old.column_incidences(j)) {
                             let (from, size) = (inc.slots as usize, inc.size as usize);
@@ -393,6 +411,7 @@ impl SparsePattern {
                     }
                     Column::New(new_incidences) => {
                         let r = &rows[j];
+                        block_out.copy_from_slice(r);
                         let third = 3 * r.len();
                         for (out, &i) in row_out[..third].chunks_exact_mut(3).zip(r) {
                             out.copy_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
@@ -417,9 +436,14 @@ impl SparsePattern {
             }
         });
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        let block_ptr = starts.iter().map(|s| u32::try_from(s[3]).expect("fewer than 2^32 blocks")).collect();
+        let block_start = starts[..num_blocks].iter().map(|s| s[0]).collect();
+        let blocks = BlockStructure::from_columns(block_ptr, block_rows, block_start, at[0])
+            .expect("the layout writes ordered block columns");
         SparsePattern {
             num_blocks,
             symbolic,
+            blocks,
             col_stride,
             offsets,
             incidences,
@@ -427,6 +451,11 @@ impl SparsePattern {
             diagonal,
             spare: Buffers::default(),
         }
+    }
+
+    /// The 3x3 block structure of the pattern.
+    pub fn blocks(&self) -> &BlockStructure {
+        &self.blocks
     }
 
     /// Number of stored scalar entries.

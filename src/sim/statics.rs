@@ -54,7 +54,7 @@ impl Simulation {
             self.statics.get_or_insert_with(|| StaticSystem::new(p.solver, rhs.len(), p.tolerance, p.max_iterations));
         let stats = self.timings.time(Phase::Solve, || -> Result<SolveStats, SolveError> {
             if !statics.analysed {
-                statics.solver.analyze(pattern.symbolic.as_ref())?;
+                statics.solver.analyze_blocks(pattern.symbolic.as_ref(), pattern.blocks())?;
                 statics.analysed = true;
             }
             let matrix = pattern.matrix(values);

@@ -116,7 +116,7 @@ impl StepSystem {
     /// [`Phase::Solve`] by the caller).
     pub fn ensure_analysed(&mut self, pattern: &SparsePattern) -> Result<(), SolveError> {
         if !self.analysed {
-            self.solver.analyze(pattern.symbolic.as_ref())?;
+            self.solver.analyze_blocks(pattern.symbolic.as_ref(), pattern.blocks())?;
             self.analysed = true;
         }
         Ok(())

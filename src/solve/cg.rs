@@ -72,7 +72,7 @@ pub struct ConjugateGradient {
 /// `assembly::SparsePattern`, where every block column repeats its block
 /// rows in its three scalar columns: block rows of block column `j` at
 /// `rows[ptr[j]..ptr[j + 1]]`, its first value at `start[j]`.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct BlockStructure {
     pub(super) ptr: Vec<u32>,
     pub(super) rows: Vec<u32>,
@@ -110,6 +110,61 @@ impl BlockStructure {
             .collect();
         let start = (0..blocks).map(|j| cp[3 * j]).collect();
         Ok(BlockStructure { ptr, rows, start })
+    }
+
+    /// The structure of block columns given directly (by a caller that laid
+    /// the pattern out, without reading its scalar rows): block rows of
+    /// column `j` at `rows[ptr[j]..ptr[j + 1]]`, its `9 × rows` values from
+    /// `start[j]` on, for a matrix of `nnz` values. Checked (in parallel):
+    /// `ptr` runs from 0 to `rows.len()`, every column's rows ascend below
+    /// the number of blocks, and the columns' values follow one another up
+    /// to `nnz`; an error names the first block column that fails.
+    pub fn from_columns(ptr: Vec<u32>, rows: Vec<u32>, start: Vec<usize>, nnz: usize) -> Result<Self, SolveError> {
+        let blocks = start.len();
+        let shape_ok = ptr.len() == blocks + 1
+            && ptr.first() == Some(&0)
+            && ptr.last().map(|&p| p as usize) == Some(rows.len())
+            && ptr.windows(2).all(|w| w[0] <= w[1])
+            && start.first().is_none_or(|&s| s == 0);
+        if !shape_ok {
+            return Err(SolveError::Analysis("the block columns' offsets are inconsistent".into()));
+        }
+        let bad = (0..blocks).into_par_iter().find_first(|&j| {
+            let column = &rows[ptr[j] as usize..ptr[j + 1] as usize];
+            let end = if j + 1 < blocks { start[j + 1] } else { nnz };
+            let ascending =
+                column.windows(2).all(|w| w[0] < w[1]) && column.last().is_none_or(|&r| (r as usize) < blocks);
+            !(ascending && start[j].checked_add(9 * column.len()) == Some(end))
+        });
+        match bad {
+            Some(j) => Err(SolveError::Analysis(format!("block column {j} is not laid out in order"))),
+            None => Ok(BlockStructure { ptr, rows, start }),
+        }
+    }
+
+    /// The block rows of block column `j`.
+    pub fn column_rows(&self, j: usize) -> &[u32] {
+        &self.rows[self.ptr[j] as usize..self.ptr[j + 1] as usize]
+    }
+
+    /// Takes the block rows out (the storage a caller may reuse).
+    pub fn into_rows(self) -> Vec<u32> {
+        self.rows
+    }
+
+    /// Number of values the structure lays out.
+    fn values_len(&self) -> usize {
+        self.start.last().map_or(0, |&s| s + 9 * self.column_rows(self.len() - 1).len())
+    }
+
+    /// Number of block columns.
+    pub fn len(&self) -> usize {
+        self.start.len()
+    }
+
+    /// Whether there are no block columns.
+    pub fn is_empty(&self) -> bool {
+        self.start.is_empty()
     }
 
     /// The structure as the product kernel takes it.
@@ -383,8 +438,20 @@ fn invert3(m: [f64; 9]) -> [f64; 9] {
 
 impl LinearSolver for ConjugateGradient {
     fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError> {
-        let n = pattern.nrows();
         let blocks = BlockStructure::new(pattern)?;
+        self.analyze_blocks(pattern, &blocks)
+    }
+
+    fn analyze_blocks(
+        &mut self,
+        pattern: SymbolicSparseColMatRef<'_, usize>,
+        blocks: &BlockStructure,
+    ) -> Result<(), SolveError> {
+        let n = pattern.nrows();
+        if 3 * blocks.len() != n || blocks.values_len() != pattern.row_idx().len() {
+            return Err(SolveError::Analysis("the block structure is not the pattern's".into()));
+        }
+        let blocks = blocks.clone();
         // the diagonal block's nine slots from its position among the block
         // rows (one search per block; the first block without one is named)
         let slots: Vec<Option<[usize; 9]>> = (0..n / 3)
@@ -524,6 +591,37 @@ impl LinearSolver for ConjugateGradient {
 mod tests {
     use super::*;
     use faer::sparse::SymbolicSparseColMat;
+
+    #[test]
+    fn block_columns_given_directly_are_checked() {
+        let (pattern, _) = chain(5, 1.0);
+        let read = BlockStructure::new(pattern.as_ref()).unwrap();
+        let nnz = pattern.row_idx().len();
+        let parts = || (read.ptr.clone(), read.rows.clone(), read.start.clone());
+        let (ptr, rows, start) = parts();
+        assert_eq!(BlockStructure::from_columns(ptr, rows, start, nnz).unwrap(), read);
+        // rows out of order, a row past the blocks, values that do not follow
+        // one another, the wrong number of values, offsets that do not close
+        let (ptr, mut rows, start) = parts();
+        rows.swap(0, 1);
+        assert!(BlockStructure::from_columns(ptr, rows, start, nnz).is_err());
+        let (ptr, mut rows, start) = parts();
+        *rows.last_mut().unwrap() = 5;
+        assert!(BlockStructure::from_columns(ptr, rows, start, nnz).is_err());
+        let (ptr, rows, mut start) = parts();
+        start[2] += 1;
+        assert!(BlockStructure::from_columns(ptr, rows, start, nnz).is_err());
+        let (ptr, rows, start) = parts();
+        assert!(BlockStructure::from_columns(ptr, rows, start, nnz + 9).is_err());
+        let (mut ptr, rows, start) = parts();
+        *ptr.last_mut().unwrap() -= 1;
+        assert!(BlockStructure::from_columns(ptr, rows, start, nnz).is_err());
+        // a solver given another pattern's structure refuses it
+        let (other, _) = chain(4, 1.0);
+        let mut cg = ConjugateGradient::new(1e-8, 100);
+        assert!(cg.analyze_blocks(other.as_ref(), &read).is_err());
+        assert!(cg.analyze_blocks(pattern.as_ref(), &read).is_ok());
+    }
 
     /// A symmetric positive definite chain of `n` 3x3 blocks in the layout
     /// of `assembly::SparsePattern` (each block column repeating its block

@@ -61,6 +61,18 @@ pub struct SolveStats {
 pub trait LinearSolver: Send + Sync {
     /// Prepares for matrices with the structure `pattern` (both triangles).
     fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError>;
+    /// [`LinearSolver::analyze`] for a pattern in 3x3 block columns whose
+    /// [`BlockStructure`] the caller already has (`blocks` must be that of
+    /// `pattern`): a solver that works on blocks takes it instead of
+    /// reading it off the scalar rows. By default, `analyze`.
+    fn analyze_blocks(
+        &mut self,
+        pattern: SymbolicSparseColMatRef<'_, usize>,
+        blocks: &BlockStructure,
+    ) -> Result<(), SolveError> {
+        let _ = blocks;
+        self.analyze(pattern)
+    }
     /// Takes the current values of the matrix.
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError>;
     /// Solves `A x = b` for the matrix last given to `factor`; `x` holds a
