@@ -108,13 +108,29 @@ impl CoarseSpace {
         for c in counts {
             run_ptr.push(run_ptr.last().expect("starts with 0") + c);
         }
-        let (run_end, run_aggregate): (Vec<u32>, Vec<u32>) = (0..n)
-            .into_par_iter()
-            .flat_map_iter(|j| {
-                let (rows, of) = (column_rows(j), &of);
-                run_ends(rows, of).map(move |p| (p as u32 + 1, of[rows[p] as usize]))
-            })
-            .unzip();
+        // (each task of columns writes its own stretch of the runs)
+        let runs = *run_ptr.last().expect("starts with 0") as usize;
+        let (mut run_end, mut run_aggregate) = (vec![0u32; runs], vec![0u32; runs]);
+        let mut tasks = Vec::with_capacity(n.div_ceil(RUN_TASK_COLUMNS));
+        let (mut ends, mut aggregates) = (&mut run_end[..], &mut run_aggregate[..]);
+        for first in (0..n).step_by(RUN_TASK_COLUMNS) {
+            let last = (first + RUN_TASK_COLUMNS).min(n);
+            let len = (run_ptr[last] - run_ptr[first]) as usize;
+            let (e, rest_e) = std::mem::take(&mut ends).split_at_mut(len);
+            let (a, rest_a) = std::mem::take(&mut aggregates).split_at_mut(len);
+            (ends, aggregates) = (rest_e, rest_a);
+            tasks.push((first..last, e, a));
+        }
+        tasks.into_par_iter().for_each(|(columns, ends, aggregates)| {
+            let mut k = 0;
+            for j in columns {
+                let rows = column_rows(j);
+                for p in run_ends(rows, &of) {
+                    (ends[k], aggregates[k]) = (p as u32 + 1, of[rows[p] as usize]);
+                    k += 1;
+                }
+            }
+        });
         let run_sums = vec![[0.0; 18]; run_end.len()];
         CoarseSpace { of, ptr, members, run_ptr, run_end, run_aggregate, run_sums, ..Default::default() }
     }
