@@ -4,6 +4,7 @@
 //! lists them all (for `cleave info`). Every error names the problem and the
 //! place (node, face or element id, zero-based).
 
+use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
 
 use cleave_kernels::vec3::{dot, sub};
@@ -248,30 +249,31 @@ impl PolyMesh {
 
     /// Checks only `elements` (after a local topology change): their faces'
     /// indices, areas and planarity, closedness, orientation and volume.
+    /// The elements are checked in parallel; the error is the first in
+    /// their order.
     pub fn check_elements(&self, elements: &[usize], opts: &ValidationOptions) -> Result<(), MeshError> {
-        for &e in elements {
-            let el = &self.elements[e];
-            for r in &el.faces {
-                let f = r.face as usize;
-                if f >= self.faces.len() {
-                    return Err(MeshError::FaceIndexOutOfRange { element: e, index: f, faces: self.faces.len() });
-                }
-                if let Some(&bad) = self.faces[f].vertices.iter().find(|&&v| v as usize >= self.nodes.len()) {
-                    return Err(MeshError::NodeIndexOutOfRange {
-                        element: e,
-                        index: bad as usize,
-                        nodes: self.nodes.len(),
-                    });
-                }
-                if let Some(problem) = self.face_shape_problem(f, opts) {
-                    return Err(problem);
-                }
+        elements.par_iter().find_map_first(|&e| self.element_problem(e, opts)).map_or(Ok(()), Err)
+    }
+
+    /// The first problem [`PolyMesh::check_elements`] finds with element `e`.
+    fn element_problem(&self, e: usize, opts: &ValidationOptions) -> Option<MeshError> {
+        for r in &self.elements[e].faces {
+            let f = r.face as usize;
+            if f >= self.faces.len() {
+                return Some(MeshError::FaceIndexOutOfRange { element: e, index: f, faces: self.faces.len() });
             }
-            if let Some(problem) = self.element_shape_problem(e) {
-                return Err(problem);
+            if let Some(&bad) = self.faces[f].vertices.iter().find(|&&v| v as usize >= self.nodes.len()) {
+                return Some(MeshError::NodeIndexOutOfRange {
+                    element: e,
+                    index: bad as usize,
+                    nodes: self.nodes.len(),
+                });
+            }
+            if let Some(problem) = self.face_shape_problem(f, opts) {
+                return Some(problem);
             }
         }
-        Ok(())
+        self.element_shape_problem(e)
     }
 
     /// A face with (almost) no area or off its plane.
