@@ -25,12 +25,16 @@ use rayon::prelude::*;
 
 use cleave_kernels::vec3::{add, scale, sub};
 
-/// The sorted, distinct nodes of the faces `refs`.
-fn nodes_of(faces: &[Face], refs: &[FaceRef]) -> Vec<u32> {
-    let mut nodes: Vec<u32> = refs.iter().flat_map(|r| faces[r.face as usize].vertices.iter().copied()).collect();
+/// Sets `nodes` to the sorted, distinct nodes of the faces `refs`, in its
+/// own storage (a cut refreshes thousands of node lists).
+fn collect_nodes(faces: &[Face], refs: &[FaceRef], nodes: &mut Vec<u32>) {
+    nodes.clear();
+    nodes.reserve(refs.iter().map(|r| faces[r.face as usize].vertices.len()).sum());
+    for r in refs {
+        nodes.extend_from_slice(&faces[r.face as usize].vertices);
+    }
     nodes.sort_unstable();
     nodes.dedup();
-    nodes
 }
 
 /// A global face: a vertex loop and its triangulation.
@@ -205,7 +209,7 @@ impl PolyMesh {
             mesh.elements.push(Element { faces: refs, nodes: Vec::new() });
         }
         let faces = &mesh.faces;
-        mesh.elements.par_iter_mut().for_each(|el| el.nodes = nodes_of(faces, &el.faces));
+        mesh.elements.par_iter_mut().for_each(|el| collect_nodes(faces, &el.faces, &mut el.nodes));
         mesh.triangulate_all();
         mesh.orient()?;
         Ok(mesh)
@@ -223,7 +227,8 @@ impl PolyMesh {
 
     /// Recomputes the sorted node list of element `e` from its faces.
     pub(crate) fn refresh_element_nodes(&mut self, e: usize) {
-        self.elements[e].nodes = nodes_of(&self.faces, &self.elements[e].faces);
+        let element = &mut self.elements[e];
+        collect_nodes(&self.faces, &element.faces, &mut element.nodes);
     }
 
     /// (Re)computes the triangulation of every face.

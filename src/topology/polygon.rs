@@ -35,6 +35,28 @@ pub struct PolygonCutReport {
     pub pocket: Option<(u32, Vec<u32>)>,
 }
 
+/// The elements using a face: at most two in a valid mesh (a third is
+/// [`crate::mesh::MeshError::FaceSharedByMoreThanTwo`]), kept without a
+/// heap list of their own.
+#[derive(Clone, Copy, Debug, Default)]
+struct FaceUsers {
+    ids: [u32; 2],
+    len: u8,
+}
+
+impl FaceUsers {
+    fn push(&mut self, e: u32) {
+        if let Some(slot) = self.ids.get_mut(self.len as usize) {
+            *slot = e;
+            self.len += 1;
+        }
+    }
+
+    fn as_slice(&self) -> &[u32] {
+        &self.ids[..self.len as usize]
+    }
+}
+
 /// 2-D frame of the polygon's plane.
 struct Frame {
     origin: [f64; 3],
@@ -78,11 +100,22 @@ fn convex_overlap(a: &[[f64; 2]], b: &[[f64; 2]]) -> bool {
     true
 }
 
-/// Counter-clockwise convex hull order of points (by angle about their mean).
+/// Counter-clockwise convex hull order of points (by angle about their
+/// mean, measured by a pseudo-angle that grows with it: `dx / (|dx| + |dy|)`
+/// mapped onto `[0, 4)`, which orders like `atan2` without calling it).
 fn ccw(points: &mut [[f64; 2]]) {
     let n = points.len() as f64;
     let c = points.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
-    points.sort_by(|p, q| (p[1] - c[1]).atan2(p[0] - c[0]).total_cmp(&(q[1] - c[1]).atan2(q[0] - c[0])));
+    let angle = |p: &[f64; 2]| {
+        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+        let t = dx / (dx.abs() + dy.abs());
+        match (dy >= 0.0, t.is_nan()) {
+            (_, true) => 0.0,
+            (true, false) => 1.0 - t,
+            (false, false) => 3.0 + t,
+        }
+    };
+    points.sort_by(|p, q| angle(p).total_cmp(&angle(q)));
 }
 
 /// The plane of a cut polygon: through its vertex mean, with the unit
@@ -151,14 +184,14 @@ pub fn cut_by_polygon_keeping(
     let candidates: Vec<usize> = scope.elements(mesh).collect();
     let chosen: Vec<u32> = candidates
         .into_par_iter()
-        .filter(|&e| {
+        .map_init(Vec::new, |section, e| {
             let el = &mesh.elements[e];
             let d = el.nodes.iter().map(|&v| node_dist[v as usize]);
             if !(d.clone().any(|x| x > 0.0) && d.clone().any(|x| x < 0.0)) {
-                return false;
+                return None;
             }
             // the section: crossings of the element's edges and vertices on the plane
-            let mut section = Vec::new();
+            section.clear();
             for r in &el.faces {
                 let lp = &mesh.faces[r.face as usize].vertices;
                 for i in 0..lp.len() {
@@ -171,12 +204,13 @@ pub fn cut_by_polygon_keeping(
                     }
                 }
             }
-            section.len() >= 3 && {
-                ccw(&mut section);
-                convex_overlap(&section, &outline)
-            }
+            let overlaps = section.len() >= 3 && {
+                ccw(section);
+                convex_overlap(section, &outline)
+            };
+            overlaps.then_some(e as u32)
         })
-        .map(|e| e as u32)
+        .flatten()
         .collect();
     let nodes_before = mesh.nodes.len();
     let split = split(mesh, &plane, Some(&chosen), keep_whole, opts, scope)?;
@@ -195,7 +229,8 @@ pub fn cut_by_polygon_keeping(
         region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
     region_faces.sort_unstable();
     region_faces.dedup();
-    let mut users: HashMap<u32, Vec<u32>> = HashMap::default();
+    let mut users: HashMap<u32, FaceUsers> = HashMap::default();
+    users.reserve(region_faces.len());
     for &e in &region {
         for r in &mesh.elements[e as usize].faces {
             users.entry(r.face).or_default().push(e);
@@ -208,7 +243,7 @@ pub fn cut_by_polygon_keeping(
     let mut detour: Vec<u32> = Vec::new();
     for &e in &split.kept_whole {
         for r in &mesh.elements[e as usize].faces {
-            let across = users[&r.face].iter().any(|&o| side[o as usize] != side[e as usize]);
+            let across = users[&r.face].as_slice().iter().any(|&o| side[o as usize] != side[e as usize]);
             if across && !listed[r.face as usize] {
                 listed[r.face as usize] = true;
                 in_plane.push(r.face);
@@ -231,7 +266,7 @@ pub fn cut_by_polygon_keeping(
     for &f in &region_faces {
         let face = &mesh.faces[f as usize];
         if !listed[f as usize]
-            && users[&f].len() == 2
+            && users[&f].len == 2
             && face.vertices.iter().all(|&v| on_plane(mesh, v))
             && meets_polygon(mesh, &face.vertices)
         {
@@ -295,7 +330,7 @@ pub fn cut_by_polygon_keeping(
                 continue;
             }
             // an element kept as it is keeps its faces and edges
-            let guarded = |g: u32| users.get(&g).is_some_and(|u| u.iter().any(protected));
+            let guarded = |g: u32| users.get(&g).is_some_and(|u| u.as_slice().iter().any(protected));
             let crossed_guarded = (0..lp.len()).filter(|&j| s[j] * s[(j + 1) % lp.len()] < 0).any(|j| {
                 let (va, vb) = (lp[j], lp[(j + 1) % lp.len()]);
                 node_faces
@@ -355,8 +390,8 @@ pub fn cut_by_polygon_keeping(
             }
             mesh.faces.push(Face { vertices: outside, triangles: Vec::new() });
             mesh.triangulate_face(g as usize);
-            let face_users = users.get(&(f as u32)).cloned().unwrap_or_default();
-            for &e in &face_users {
+            let face_users = users.get(&(f as u32)).copied().unwrap_or_default();
+            for &e in face_users.as_slice() {
                 let r = mesh.elements[e as usize].faces.iter().find(|r| r.face as usize == f).copied();
                 if let Some(r) = r {
                     mesh.elements[e as usize].faces.push(FaceRef { face: g, outward: r.outward });
@@ -392,14 +427,15 @@ pub fn cut_by_polygon_keeping(
             ccw(&mut pts);
             let room =
                 (0..pts.len()).map(|i| side_of(pts[i], pts[(i + 1) % pts.len()], c2)).fold(f64::INFINITY, f64::min);
-            let size = users[&f].iter().map(|&e| mesh.element_diameter(e as usize)).fold(f64::INFINITY, f64::min);
+            let size =
+                users[&f].as_slice().iter().map(|&e| mesh.element_diameter(e as usize)).fold(f64::INFINITY, f64::min);
             (room / size, c)
         };
         let host = inside_faces
             .iter()
             .copied()
             .filter(|f| !detour.contains(f) && mesh.faces[*f as usize].vertices.iter().all(|&v| on_plane(mesh, v)))
-            .filter(|f| !users[f].iter().any(protected))
+            .filter(|f| !users[f].as_slice().iter().any(protected))
             .map(|f| (f, clearance(mesh, f)))
             .filter(|(_, (room, _))| *room >= opts.min_spacing)
             .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
@@ -422,7 +458,7 @@ pub fn cut_by_polygon_keeping(
                     }
                 })
                 .collect();
-            for &e in users.get(&f).cloned().unwrap_or_default().iter() {
+            for &e in users.get(&f).copied().unwrap_or_default().as_slice() {
                 if let Some(r) = mesh.elements[e as usize].faces.iter().find(|r| r.face == f).copied() {
                     for &g in &fan[1..] {
                         mesh.elements[e as usize].faces.push(FaceRef { face: g, outward: r.outward });
@@ -438,7 +474,7 @@ pub fn cut_by_polygon_keeping(
     let mut touched: Vec<u32> =
         split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.repaired_elements.iter().copied()).collect();
     for f in &touched_faces {
-        touched.extend(users.get(f).cloned().unwrap_or_default());
+        touched.extend(users.get(f).copied().unwrap_or_default().as_slice());
     }
     touched.sort_unstable();
     touched.dedup();

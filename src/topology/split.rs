@@ -300,34 +300,37 @@ pub(crate) fn classify(
     // not chosen, protected or unhealthy once split
     let both: Vec<usize> = straddling.iter().copied().filter(|&e| has_both(e)).collect();
     // (the trial splits are independent: run in parallel)
-    let mut keep: HashMap<usize, bool> = both
+    let kept_by_trial: Vec<bool> = both
         .par_iter()
-        .map(|&e| (e, !chosen[e] || protected(e) || !split_is_healthy(mesh, e, &dist, &side, plane, opts)))
-        .collect::<Vec<_>>()
-        .into_iter()
+        .map(|&e| !chosen[e] || protected(e) || !split_is_healthy(mesh, e, &dist, &side, plane, opts))
         .collect();
+    let mut keep = vec![false; mesh.elements.len()];
+    both.iter().zip(&kept_by_trial).for_each(|(&e, &k)| keep[e] = k);
     // the elements on each crossed edge (every element holding an edge with
-    // ends on opposite sides has nodes on both sides)
-    let mut edge_users: HashMap<(u32, u32), Vec<usize>> = HashMap::default();
+    // ends on opposite sides has nodes on both sides), as sorted pairs
+    let mut edge_users: Vec<((u32, u32), usize)> = Vec::new();
     for &e in &both {
         for r in &mesh.elements[e].faces {
             let v = &mesh.faces[r.face as usize].vertices;
             for i in 0..v.len() {
                 let (a, b) = (v[i], v[(i + 1) % v.len()]);
                 if side[a as usize] * side[b as usize] < 0 {
-                    let users = edge_users.entry((a.min(b), a.max(b))).or_default();
-                    if !users.contains(&e) {
-                        users.push(e);
-                    }
+                    edge_users.push(((a.min(b), a.max(b)), e));
                 }
             }
         }
     }
+    edge_users.sort_unstable();
+    edge_users.dedup();
+    let users_of = |key: (u32, u32)| {
+        let first = edge_users.partition_point(|u| u.0 < key);
+        edge_users[first..].iter().take_while(move |u| u.0 == key).map(|u| u.1)
+    };
     // an element kept whole receives the new nodes on its edges that split
     // neighbours make; where one would come too close to its nodes (or the
     // element is protected), every element on that edge is kept whole
     // (until nothing changes)
-    let mut kept: Vec<usize> = both.iter().copied().filter(|e| keep[e]).collect();
+    let mut kept: Vec<usize> = both.iter().copied().filter(|&e| keep[e]).collect();
     let mut k = 0;
     while k < kept.len() {
         let e = kept[k];
@@ -340,7 +343,7 @@ pub(crate) fn classify(
             let v = &mesh.faces[r.face as usize].vertices;
             for i in 0..v.len() {
                 let key = (v[i].min(v[(i + 1) % v.len()]), v[i].max(v[(i + 1) % v.len()]));
-                let split_user = edge_users.get(&key).is_some_and(|u| u.iter().any(|o| !keep[o]));
+                let split_user = users_of(key).any(|o| !keep[o]);
                 if split_user && !gained.contains(&key) {
                     gained.push(key);
                     points.push(crossing(&mesh.nodes, &dist, key.0, key.1).3);
@@ -355,9 +358,9 @@ pub(crate) fn classify(
             let p = points[own + g];
             let close = points.iter().enumerate().any(|(j, &q)| j != own + g && norm(sub(p, q)) < limit);
             if close || protected(e) {
-                for &o in &edge_users[key] {
-                    if !keep[&o] {
-                        keep.insert(o, true);
+                for o in users_of(*key) {
+                    if !keep[o] {
+                        keep[o] = true;
                         kept.push(o);
                     }
                 }
@@ -365,7 +368,7 @@ pub(crate) fn classify(
         }
     }
     let (mut kept_whole, crossed): (Vec<usize>, Vec<usize>) =
-        both.iter().filter(|&&e| chosen[e]).partition(|e| keep[e]);
+        both.iter().filter(|&&e| chosen[e]).partition(|&&e| keep[e]);
     kept_whole.sort_unstable();
     Ok(Classification { dist, side, straddling, crossed, kept_whole, on_plane })
 }
