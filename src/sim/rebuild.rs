@@ -6,7 +6,8 @@
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
     conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, node_diameters, open_pinched_nodes,
-    pinched_nodes, polygon_plane, CutReport, CutScope, NodeOrigins, PolygonCutReport, Reach, Rollback, SplitOptions, raise_node_diameters,
+    pinched_nodes, polygon_plane, raise_node_diameters, CutReport, CutScope, NodeOrigins, PolygonCutReport, Reach,
+    Rollback, SplitOptions,
 };
 use crate::Error;
 

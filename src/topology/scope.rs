@@ -173,9 +173,12 @@ mod tests {
         assert!(4 * near.len() < slab.len(), "{} of {}", near.len(), slab.len());
         let meets = |e: usize| {
             let x = mesh.elements[e].nodes.iter().map(|&v| mesh.nodes[v as usize]);
-            x.clone().any(|p| p[0] < 0.55) && x.clone().any(|p| p[0] > 0.55) && x.clone().all(|p| p[1] < 0.3 && p[2] < 0.3)
+            x.clone().any(|p| p[0] < 0.55)
+                && x.clone().any(|p| p[0] > 0.55)
+                && x.clone().all(|p| p[1] < 0.3 && p[2] < 0.3)
         };
-        let missing: Vec<usize> = (0..mesh.elements.len()).filter(|&e| meets(e) && near.binary_search(&(e as u32)).is_err()).collect();
+        let missing: Vec<usize> =
+            (0..mesh.elements.len()).filter(|&e| meets(e) && near.binary_search(&(e as u32)).is_err()).collect();
         assert!(missing.is_empty(), "{missing:?}");
     }
 }
