@@ -141,10 +141,16 @@ pub(crate) fn face_key(vertices: &[u32]) -> Vec<u32> {
 
 /// Largest distance between two of `points` (m).
 pub(crate) fn diameter(points: &[[f64; 3]]) -> f64 {
+    diameter_of(points.len(), |i| points[i])
+}
+
+/// [`diameter`] of the `n` points `point(0..n)`, without gathering them.
+fn diameter_of(n: usize, point: impl Fn(usize) -> [f64; 3]) -> f64 {
     let mut d2: f64 = 0.0;
-    for (i, &a) in points.iter().enumerate() {
-        for &b in &points[i + 1..] {
-            let d = sub(a, b);
+    for i in 0..n {
+        let a = point(i);
+        for j in i + 1..n {
+            let d = sub(a, point(j));
             d2 = d2.max(cleave_kernels::vec3::dot(d, d));
         }
     }
@@ -332,8 +338,8 @@ impl PolyMesh {
 
     /// Largest distance between two nodes of element `e` (m).
     pub fn element_diameter(&self, e: usize) -> f64 {
-        let points: Vec<[f64; 3]> = self.elements[e].nodes.iter().map(|&v| self.nodes[v as usize]).collect();
-        diameter(&points)
+        let nodes = &self.elements[e].nodes;
+        diameter_of(nodes.len(), |i| self.nodes[nodes[i] as usize])
     }
 
     /// The median of the element diameters (m); 0 without elements.
