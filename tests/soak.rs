@@ -181,7 +181,8 @@ fn bunny_cut_two_hundred_times_stays_healthy() {
     println!("heap: {long_run:.1} MB after {steps} steps and {made} cuts, {rebuilt:.1} MB rebuilt fresh");
     // what the long run may hold beyond the fresh state, by design: the
     // pattern keeps its previous arrays as spare buffers (a cut writes
-    // into them instead of fresh pages) with an eighth more room, and
+    // into them instead of fresh pages) with room for two more cuts like
+    // the one that grew them (at least a sixteenth), and
     // vectors grown by cuts keep the slack of amortised doubling. The CI
     // form measured 1.23x (154.2 against 125.5 MB). Anything that piled up
     // with the cuts would grow this ratio with the run's length.

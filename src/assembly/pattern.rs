@@ -162,14 +162,14 @@ fn checked_columns(n: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>) -> Symbol
 /// Sets the length of a reused `array` to `len` for
 /// [`SparsePattern::lay_out`], which overwrites every value: its old
 /// contents stay, so only what it grows by is written here. An array too
-/// small is emptied first (growing then copies nothing) and given a quarter
-/// more than `len`: room for what the next cuts add (the spare arrays are
-/// two topologies old when reused; a blade cut across bunny_100k adds
-/// about 5 % to its entries).
-fn fit<T: Copy>(array: &mut Vec<T>, len: usize, fill: T) {
+/// small is emptied first (growing then copies nothing) and given room for
+/// two more changes like this one, from `previous` values to `len` (the
+/// spare arrays are two topologies old when reused; a blade cut across
+/// bunny_100k adds about 5 % to its entries), and at least a sixteenth.
+fn fit<T: Copy>(array: &mut Vec<T>, len: usize, previous: usize, fill: T) {
     if array.capacity() < len {
         array.clear();
-        array.reserve(len + len / 4);
+        array.reserve(len + (2 * len.saturating_sub(previous)).max(len / 16));
     }
     array.resize(len, fill);
 }
@@ -236,7 +236,7 @@ impl SparsePattern {
             slots: Vec::with_capacity(slots),
             ..Default::default()
         };
-        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), buffers)
+        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), buffers, None)
     }
 
     /// The pattern of no blocks.
@@ -298,7 +298,8 @@ impl SparsePattern {
                 Column::New(incidences)
             })
             .collect();
-        let new = Self::lay_out(store, columns, spare);
+        let previous = [self.nnz(), self.incidences.len(), self.slots.len(), self.blocks.rows_len()];
+        let new = Self::lay_out(store, columns, spare, Some(previous));
         let old = std::mem::replace(self, new);
         let (_, _, col_ptr, _, row_idx) = old.symbolic.into_parts();
         let block_rows = old.blocks.into_rows();
@@ -323,8 +324,9 @@ impl SparsePattern {
     /// the rows and slots of kept columns: the sizes first, then every
     /// column written into its own stretch of the arrays, in parallel over
     /// runs of [`LAY_OUT_RUN`] columns (the arrays are the same whatever
-    /// the thread count).
-    fn lay_out(store: &impl Couplings, columns: Vec<Column>, buffers: Buffers) -> Self {
+    /// the thread count). `previous` are the sizes of the pattern this one
+    /// replaces (entries, incidences, slots, block rows), if any.
+    fn lay_out(store: &impl Couplings, columns: Vec<Column>, buffers: Buffers, previous: Option<[usize; 4]>) -> Self {
         let num_blocks = columns.len();
         // block rows of every recomputed column: union of its elements' nodes
         let rows: Vec<Vec<u32>> = columns
@@ -382,10 +384,11 @@ impl SparsePattern {
         let offsets: Vec<u32> =
             starts.iter().map(|s| u32::try_from(s[1]).expect("fewer than 2^32 incidences")).collect();
         let unset = Incidence { batch: 0, element: 0, id: 0, local: 0, size: 0, slots: 0 };
-        fit(&mut row_idx, at[0], 0);
-        fit(&mut block_rows, at[3], 0);
-        fit(&mut incidences, at[1], unset);
-        fit(&mut slots, at[2], 0);
+        let previous = previous.unwrap_or(at);
+        fit(&mut row_idx, at[0], previous[0], 0);
+        fit(&mut block_rows, at[3], previous[3], 0);
+        fit(&mut incidences, at[1], previous[1], unset);
+        fit(&mut slots, at[2], previous[2], 0);
         // the arrays cut into the stretches of runs of columns
         let mut runs = Vec::with_capacity(num_blocks.div_ceil(LAY_OUT_RUN));
         let (mut row_rest, mut inc_rest, mut slot_rest) = (&mut row_idx[..], &mut incidences[..], &mut slots[..]);

@@ -147,6 +147,11 @@ impl BlockStructure {
         &self.rows[self.ptr[j] as usize..self.ptr[j + 1] as usize]
     }
 
+    /// Number of block rows over all block columns.
+    pub fn rows_len(&self) -> usize {
+        self.rows.len()
+    }
+
     /// Takes the block rows out (the storage a caller may reuse).
     pub fn into_rows(self) -> Vec<u32> {
         self.rows
