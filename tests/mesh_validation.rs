@@ -155,3 +155,27 @@ fn overlapping_elements() {
     assert!(matches!(e, MeshError::OverlappingElements { a: 0, b: 1, .. }), "{e}");
     assert!(m.contains("overlap"));
 }
+
+/// A local check of several elements (after a cut, in parallel) names the
+/// first bad one in the order it was given, whatever the thread count.
+#[test]
+fn checking_listed_elements_names_the_first_bad_one_in_their_order() {
+    let mut mesh = box_hex([0.0; 3], [1.0; 3], [4, 4, 4]).unwrap();
+    let faces = mesh.faces.len() as u32;
+    for e in [9, 41] {
+        mesh.elements[e].faces[0].face = faces + e as u32;
+    }
+    let listed: Vec<usize> = (0..mesh.elements.len()).rev().collect();
+    for threads in [1, 2, 4] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let checked = pool.install(|| mesh.check_elements(&listed, &Default::default()));
+        let (e, m) = message(checked);
+        assert_eq!(
+            e,
+            MeshError::FaceIndexOutOfRange { element: 41, index: (faces + 41) as usize, faces: faces as usize }
+        );
+        assert!(m.contains("41"), "{m}");
+        let good: Vec<usize> = (0..mesh.elements.len()).filter(|&e| e != 9 && e != 41).collect();
+        assert!(pool.install(|| mesh.check_elements(&good, &Default::default())).is_ok());
+    }
+}
