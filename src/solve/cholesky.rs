@@ -19,6 +19,11 @@ use faer::{Conj, MatMut, Par, Side};
 
 use super::{LinearSolver, SolveError, SolveStats};
 
+/// Unknowns from which the default numeric factorisation runs in parallel
+/// (see [`Cholesky::new`]; measured at 6.6k unknowns, no gain, and 53k,
+/// 1.5x on 2 cores).
+pub const PARALLEL_CHOLESKY_MIN_UNKNOWNS: usize = 30_000;
+
 /// Direct sparse Cholesky solver.
 #[derive(Default)]
 pub struct Cholesky {
@@ -32,18 +37,24 @@ pub struct Cholesky {
 }
 
 impl Cholesky {
-    /// A solver whose numeric factorisation runs with `par`. The default
-    /// is sequential: on the 2-core machines we measure on, faer's
-    /// parallel supernodal factorisation took 1.0x to 2.9x as long as the
-    /// sequential one from 4k to 110k unknowns, never less (`cleave bench
-    /// --only pipeline` prints both), and a sequential factor is also the
-    /// same bits whatever the pool.
+    /// A solver whose numeric factorisation runs with `par`. By default it
+    /// runs sequentially below [`PARALLEL_CHOLESKY_MIN_UNKNOWNS`] unknowns,
+    /// and from there on with faer's parallel supernodal factorisation over
+    /// the current rayon pool, inside the pool (no hand-over between
+    /// threads per parallel call). On bunny_100k (53k unknowns, 2 cores)
+    /// the parallel one factored `K + 10³ I` in 360 ms against 550 ms, and
+    /// `scenes/bunny_slices.toml` spent 34.5 s solving against 36.6 s; on
+    /// bunny_5k (6.6k unknowns) it was no faster, and steps with it were
+    /// slower. The parallel factor has the same bits as the sequential one
+    /// whatever the pool's size (checked on both bunnies with pools of 1 to
+    /// 4 threads, and by `parallel_factor_has_the_same_bits_on_any_pool`).
     pub fn new(par: Par) -> Self {
         Cholesky { par: Some(par), ..Default::default() }
     }
 
-    fn par(&self) -> Par {
-        self.par.unwrap_or(Par::Seq)
+    /// The parallelism of the numeric factorisation of `unknowns` unknowns.
+    fn par(&self, unknowns: usize) -> Par {
+        self.par.unwrap_or(if unknowns >= PARALLEL_CHOLESKY_MIN_UNKNOWNS { Par::rayon(0) } else { Par::Seq })
     }
 
     /// Overwrites `x` with `A⁻¹ x` for the last factored `A`.
@@ -94,7 +105,7 @@ impl LinearSolver for Cholesky {
         };
         let sym = factorize_symbolic_cholesky(pattern, Side::Lower, ordering, CholeskySymbolicParams::default())
             .map_err(|e| SolveError::Analysis(format!("{e:?}")))?;
-        let par = self.par();
+        let par = self.par(pattern.nrows());
         let req = sym
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
             .or(sym.solve_in_place_scratch::<f64>(1, par));
@@ -106,7 +117,7 @@ impl LinearSolver for Cholesky {
     }
 
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
-        let par = self.par();
+        let par = self.par(matrix.nrows());
         let (Some(sym), Some(buf)) = (self.symbolic.as_ref(), self.scratch.as_mut()) else {
             return Err(SolveError::NotReady);
         };
@@ -114,15 +125,18 @@ impl LinearSolver for Cholesky {
             return Err(SolveError::NonFinite);
         }
         self.factored = false;
-        sym.factorize_numeric_llt(
-            &mut self.l_values,
-            matrix,
-            Side::Lower,
-            LltRegularization::default(),
-            par,
-            MemStack::new(buf),
-            Default::default(),
-        )
+        let l_values = &mut self.l_values;
+        crate::in_pool(|| {
+            sym.factorize_numeric_llt(
+                l_values,
+                matrix,
+                Side::Lower,
+                LltRegularization::default(),
+                par,
+                MemStack::new(buf),
+                Default::default(),
+            )
+        })
         .map_err(|e| match e {
             faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => {
                 SolveError::NotPositiveDefinite { pivot: index, n: matrix.nrows() }
@@ -211,6 +225,37 @@ fn nested_dissection(pattern: SymbolicSparseColMatRef<'_, usize>) -> Option<(Vec
 mod tests {
     use super::*;
     use faer::sparse::SymbolicSparseColMat;
+
+    /// The parallel numeric factorisation of a stiffness with large
+    /// supernodes (a 12 x 12 x 12 cell box of tetrahedra plus a diagonal,
+    /// 6.6k unknowns) gives the sequential factor's solution bit for bit on
+    /// pools of 1, 2 and 4 threads.
+    #[test]
+    fn parallel_factor_has_the_same_bits_on_any_pool() {
+        use crate::assembly::SparsePattern;
+        use crate::store::{BasisOptions, ElementStore};
+        let mesh = crate::meshing::box_tet([0.0; 3], [1.0; 3], [12, 12, 12]).unwrap();
+        let material = crate::material::Material::new(1e5, 0.3, 1000.0).unwrap();
+        let store = ElementStore::build(&mesh, &material, &BasisOptions::default()).unwrap();
+        let pattern = SparsePattern::build(mesh.nodes.len(), &store);
+        let mut values = vec![0.0; pattern.nnz()];
+        pattern.assemble(&mut values, |b, i, c, out| store.batches[b].block_column(i, c, out));
+        (0..3 * mesh.nodes.len()).for_each(|d| values[pattern.diagonal_slot(d)] += 1e3);
+        let b: Vec<f64> = (0..3 * mesh.nodes.len()).map(|i| (i as f64 * 0.37).sin()).collect();
+        let solve = |par: Par| {
+            let mut chol = Cholesky::new(par);
+            chol.analyze(pattern.symbolic.as_ref()).unwrap();
+            let mut x = vec![0.0; b.len()];
+            chol.factor(pattern.matrix(&values)).unwrap();
+            chol.solve(pattern.matrix(&values), &b, &mut x).unwrap();
+            x.iter().map(|v| v.to_bits()).collect::<Vec<u64>>()
+        };
+        let sequential = solve(Par::Seq);
+        for threads in [1, 2, 4] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            assert!(pool.install(|| solve(Par::rayon(0))) == sequential, "{threads} threads");
+        }
+    }
 
     /// `L`'s entries on and below the diagonal: `n (n + 1) / 2` for a dense
     /// pattern of `n` unknowns (one supernode, whose stored upper triangle

@@ -10,7 +10,7 @@ mod coarse;
 mod envelope;
 
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
-pub use cholesky::Cholesky;
+pub use cholesky::{Cholesky, PARALLEL_CHOLESKY_MIN_UNKNOWNS};
 pub use envelope::EnvelopeCholesky;
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
