@@ -316,11 +316,11 @@ fn pipeline_on(mesh: &PolyMesh, label: &str, material: &Material) -> Result<Vec<
     let (ms, r) = best_ms(2, || chol.factor(pattern.matrix(&values)));
     r?;
     push("cholesky numeric", ms, None);
-    let mut parallel = Cholesky::new(faer::Par::rayon(0));
-    parallel.analyze(pattern.symbolic.as_ref())?;
-    let (ms_parallel, r) = best_ms(2, || parallel.factor(pattern.matrix(&values)));
+    let mut sequential = Cholesky::new(faer::Par::Seq);
+    sequential.analyze(pattern.symbolic.as_ref())?;
+    let (ms_sequential, r) = best_ms(2, || sequential.factor(pattern.matrix(&values)));
     r?;
-    push("cholesky numeric (rayon)", ms_parallel, Some(("sequential / rayon".into(), ms / ms_parallel)));
+    push("cholesky numeric (sequential)", ms_sequential, Some(("sequential / default".into(), ms_sequential / ms)));
     let b = vec![1.0; 3 * nn];
     let mut x = vec![0.0; 3 * nn];
     let (ms, r) = best_ms(3, || chol.solve(pattern.matrix(&values), &b, &mut x));
