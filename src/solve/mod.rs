@@ -110,8 +110,8 @@ pub enum SolverKind {
     /// [`SolverKind::Cholesky`] up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`]
     /// unknowns, CG above (measured with `cleave bench`: on the 100k-tet
     /// bunny, 53k unknowns, a CG step takes ~0.035 s and a refactorising
-    /// Cholesky step ~0.7 s, 2 cores; on bunny_5k, 6.5k unknowns, Cholesky
-    /// steps in 8 ms, CG in 10).
+    /// Cholesky step ~0.55 s with its parallel factor, 2 cores; on
+    /// bunny_5k, 6.5k unknowns, Cholesky steps in 8 ms, CG in 10).
     #[default]
     Auto,
     /// Direct Cholesky, refactorised whenever the matrix changes: the
