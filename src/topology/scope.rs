@@ -105,10 +105,7 @@ impl Reach {
 
     /// The reach of a cut of `mesh` with `polygon`, which lies in `plane`.
     pub fn of_polygon(mesh: &PolyMesh, plane: &Plane, polygon: &[[f64; 3]]) -> Self {
-        let bounds = polygon.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), p| {
-            (std::array::from_fn(|k| lo[k].min(p[k])), std::array::from_fn(|k| hi[k].max(p[k])))
-        });
-        Reach { bounds: Some(bounds), ..Self::of_plane(mesh, plane) }
+        Reach { bounds: Some(cleave_kernels::vec3::bounding_box(polygon)), ..Self::of_plane(mesh, plane) }
     }
 
     /// Whether a node at `x` held by elements no larger than `diameter`
