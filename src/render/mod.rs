@@ -14,7 +14,7 @@ mod raster;
 
 use std::path::Path;
 
-use cleave_kernels::vec3::{add, bounding_box, cross, dot, norm, scale, sub};
+use cleave_kernels::vec3::{add, bounding_box, cross, dot, norm, point_triangle_distance, scale, sub};
 
 use crate::io::IoError;
 use crate::mesh::Plane;
@@ -280,46 +280,6 @@ impl OriginalSurface {
 
 fn key(p: [f64; 3], cell: f64) -> [i64; 3] {
     p.map(|c| (c / cell).floor() as i64)
-}
-
-/// Distance from `p` to the triangle `t` (m).
-fn point_triangle_distance(p: [f64; 3], t: &[[f64; 3]; 3]) -> f64 {
-    // closest point by barycentric regions (Ericson, Real-Time Collision
-    // Detection, 5.1.5)
-    let (a, b, c) = (t[0], t[1], t[2]);
-    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
-    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return norm(ap);
-    }
-    let bp = sub(p, b);
-    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return norm(bp);
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return norm(sub(p, add(a, scale(ab, d1 / (d1 - d3)))));
-    }
-    let cp = sub(p, c);
-    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return norm(cp);
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return norm(sub(p, add(a, scale(ac, d2 / (d2 - d6)))));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        return norm(sub(p, add(b, scale(sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))))));
-    }
-    let denom = va + vb + vc;
-    if denom.abs() < f64::MIN_POSITIVE {
-        return norm(ap);
-    }
-    let (v, w) = (vb / denom, vc / denom);
-    norm(sub(p, add(a, add(scale(ab, v), scale(ac, w)))))
 }
 
 /// Writes `image` as an 8-bit RGB PNG, creating its folder.

@@ -1,18 +1,18 @@
 //! The 3D MFS fit of one element's harmonic shape functions (martin2008 §5).
 //!
 //! Kernel centres (`1/r`) come from samples of the element's nodes, edges
-//! (`edge_samples` inside each) and faces (a grid of the same spacing), each
+//! (`edge_samples` inside each) and faces (a grid of twice the spacing), each
 //! moved outward by `offset` times the element's diameter along the
 //! (averaged) outward normal; centres that land inside a non-convex element,
 //! too close to its surface or to another centre are dropped. Collocation
 //! points sample the same places three times as densely; their targets are
 //! `δ_ab` at nodes, the hat functions on edges and the shared face functions
-//! inside faces. One QR factorisation serves all `k` functions.
+//! inside faces. One factorisation serves all `k` functions.
 
 use std::collections::BTreeMap;
 
 use cleave_kernels::harmonic::MfsFunctions;
-use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
+use cleave_kernels::vec3::{add, cross, dot, norm, point_triangle_distance, scale, sub};
 
 use super::face::{place_centres, FaceBasis};
 use super::mfs::fit;
@@ -75,26 +75,62 @@ pub(crate) fn winding_number(verts: &[[f64; 3]], triangles: &[[u32; 3]], p: [f64
     omega / (4.0 * std::f64::consts::PI)
 }
 
-/// Distance from `p` to the triangle `t`.
-fn triangle_distance(t: [[f64; 3]; 3], p: [f64; 3]) -> f64 {
-    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-    let nn = dot(n, n);
-    if nn > 0.0 {
-        let d = dot(sub(p, t[0]), n) / nn;
-        let q = sub(p, scale(n, d));
-        let inside = (0..3).all(|i| dot(cross(sub(t[(i + 1) % 3], t[i]), sub(q, t[i])), n) >= 0.0);
-        if inside {
-            return d.abs() * nn.sqrt();
-        }
+/// A face's plane and the slab around it that holds its triangles.
+struct FacePlane {
+    /// Outward unit normal.
+    normal: [f64; 3],
+    /// `normal · x` on the plane.
+    offset: f64,
+    /// How far the face's vertices (and so its triangles) lie from the
+    /// plane, at most.
+    deviation: f64,
+    /// The face's triangles, as a range of the element's.
+    triangles: std::ops::Range<usize>,
+}
+
+/// The closed surface of an element in scaled coordinates (diameter 1),
+/// for placing kernel centres outside it.
+struct Boundary<'a> {
+    verts: &'a [[f64; 3]],
+    triangles: &'a [[u32; 3]],
+    faces: Vec<FacePlane>,
+    /// Whether every vertex lies on the inner side of every face's plane:
+    /// then a point outside one plane is outside the element.
+    convex: bool,
+}
+
+impl<'a> Boundary<'a> {
+    /// A fold shallower than this (in units of the diameter) still counts
+    /// as convex: planar faces deviate from their plane by rounding.
+    const CONVEX_TOLERANCE: f64 = 1e-9;
+
+    fn new(verts: &'a [[f64; 3]], triangles: &'a [[u32; 3]], faces: Vec<FacePlane>) -> Self {
+        let convex = faces.iter().all(|f| {
+            f.deviation <= Self::CONVEX_TOLERANCE
+                && verts.iter().all(|&v| dot(f.normal, v) - f.offset <= Self::CONVEX_TOLERANCE)
+        });
+        Boundary { verts, triangles, faces, convex }
     }
-    (0..3)
-        .map(|i| {
-            let (a, b) = (t[i], t[(i + 1) % 3]);
-            let d = sub(b, a);
-            let s = (dot(sub(p, a), d) / dot(d, d).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
-            norm(sub(p, add(a, scale(d, s))))
-        })
-        .fold(f64::INFINITY, f64::min)
+
+    /// Whether `c` lies outside the element, at least `clearance` from its
+    /// surface. A face whose slab is `clearance` or more from `c` has its
+    /// triangles as far; only the others' are measured. Outside is decided
+    /// by the faces' planes for a convex element, else by the winding
+    /// number.
+    fn clear_outside(&self, c: [f64; 3], clearance: f64) -> bool {
+        let clear = self.faces.iter().all(|f| {
+            (dot(f.normal, c) - f.offset).abs() - f.deviation >= clearance
+                || self.triangles[f.triangles.clone()]
+                    .iter()
+                    .all(|t| point_triangle_distance(c, &t.map(|i| self.verts[i as usize])) >= clearance)
+        });
+        clear
+            && if self.convex {
+                self.faces.iter().any(|f| dot(f.normal, c) > f.offset)
+            } else {
+                winding_number(self.verts, self.triangles, c) < 0.5
+            }
+    }
 }
 
 fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
@@ -163,11 +199,18 @@ pub fn element_basis(
             .interior_samples(&mesh.nodes, &mesh.faces[f], FACE_SPACING * h, |p, _| samples.push((hat(p), *n)));
     }
     let scaled: Vec<[f64; 3]> = x.iter().map(|&p| hat(p)).collect();
-    let centres = place_centres(samples, options.offset, |c| {
-        (winding_number(&scaled, &triangles, c) < 0.5).then(|| {
-            triangles.iter().map(|t| triangle_distance(t.map(|i| scaled[i as usize]), c)).fold(f64::INFINITY, f64::min)
-        })
+    let mut first_triangle = 0;
+    let face_planes = el.faces.iter().zip(&face_normals).map(|(r, &normal)| {
+        let face = &mesh.faces[r.face as usize];
+        let on_face: Vec<f64> = face.vertices.iter().map(|&v| dot(normal, scaled[local(v)])).collect();
+        let offset = on_face.iter().sum::<f64>() / on_face.len() as f64;
+        let deviation = on_face.iter().map(|h| (h - offset).abs()).fold(0.0, f64::max);
+        let triangles = first_triangle..first_triangle + face.triangles.len();
+        first_triangle = triangles.end;
+        FacePlane { normal, offset, deviation, triangles }
     });
+    let boundary = Boundary::new(&scaled, &triangles, face_planes.collect());
+    let centres = place_centres(samples, options.offset, |c, clearance| boundary.clear_outside(c, clearance));
     // collocation points and targets
     let mut colloc = Vec::new();
     let mut targets = Vec::new();

@@ -253,20 +253,20 @@ impl Polygon {
 }
 
 /// Places kernel centres: each sample moved outward by `offset`, kept only
-/// when it lies outside the region, at least `offset / 2` from its boundary
-/// and `offset / 4` from every centre kept before (martin2008 §5: centres
-/// inside a non-convex element or clustered at a concave corner are
-/// dropped).
+/// when `clear_outside(c, offset / 2)` (it lies outside the region, at
+/// least `offset / 2` from its boundary) and it is `offset / 4` from every
+/// centre kept before (martin2008 §5: centres inside a non-convex element
+/// or clustered at a concave corner are dropped).
 pub(super) fn place_centres<const D: usize>(
     samples: impl IntoIterator<Item = ([f64; D], [f64; D])>,
     offset: f64,
-    outside_distance: impl Fn([f64; D]) -> Option<f64>,
+    clear_outside: impl Fn([f64; D], f64) -> bool,
 ) -> Vec<[f64; D]> {
     let mut centres: Vec<[f64; D]> = Vec::new();
     for (s, n) in samples {
         let c: [f64; D] = std::array::from_fn(|i| s[i] + offset * n[i]);
-        let ok = outside_distance(c).is_some_and(|d| d >= 0.5 * offset)
-            && centres.iter().all(|k| (0..D).map(|i| (k[i] - c[i]).powi(2)).sum::<f64>() >= (0.25 * offset).powi(2));
+        let ok = centres.iter().all(|k| (0..D).map(|i| (k[i] - c[i]).powi(2)).sum::<f64>() >= (0.25 * offset).powi(2))
+            && clear_outside(c, 0.5 * offset);
         if ok {
             centres.push(c);
         }
@@ -319,7 +319,8 @@ fn planar_mfs(
     for i in 0..kf {
         samples.extend(edge_points(i, options.edge_samples).map(|(p, _)| (p, poly.edge_normal(i))));
     }
-    let centres = place_centres(samples, options.offset, |c| (!poly.contains(c)).then(|| poly.distance(c)));
+    let centres =
+        place_centres(samples, options.offset, |c, clearance| !poly.contains(c) && poly.distance(c) >= clearance);
     // collocation at three times the density: nodes and edge points, with
     // the hat functions as targets
     let mut colloc = Vec::new();
