@@ -5,9 +5,18 @@
 //! well scaled whatever the units), each of the `k` functions is
 //! `N(x̂) = Σ_j w_j ψ(|x̂ - k̂_j|) + c · x̂ + d` with `ψ(r) = log r` in 2D and
 //! `ψ(r) = 1/r` in 3D. The `m ≈ 3n` collocation equations
-//! `N(ĉ_i) = b(ĉ_i)` are solved in the least-squares sense by a Householder
-//! QR factorisation (faer, sequential: the caller runs elements in
-//! parallel), once for all `k` right-hand sides.
+//! `N(ĉ_i) = b(ĉ_i)` (weighted: `W A c = W b`) are solved in the
+//! least-squares sense, once for all `k` right-hand sides (faer, sequential:
+//! the caller runs elements in parallel):
+//!
+//! - by the normal equations `AᵀW²A c = AᵀW²b` and a Cholesky factorisation,
+//!   when the factor's diagonal shows a well-conditioned `A` (the kernel
+//!   matrices of this module have condition numbers of `10³` to `10⁶`, so
+//!   `AᵀA`'s are far from the `10¹⁶` of double precision; this halves the
+//!   work of a QR factorisation, and the fitted values agree with the QR
+//!   solution's to the digits the fit error has);
+//! - else (coincident or clustered kernels) by a Householder QR
+//!   factorisation, which also detects a rank-deficient `A`.
 //!
 //! The fitted coefficients are then projected, with the smallest change,
 //! onto those that reproduce constants and linear functions exactly:
@@ -15,12 +24,18 @@
 //! themselves, so partition of unity and linear reproduction hold to
 //! rounding everywhere, whatever the MFS error (the linear term makes the
 //! exact solution representable; the projection removes the rounding the
-//! QR solve amplifies on ill-conditioned kernel matrices).
+//! solve amplifies on ill-conditioned kernel matrices).
+
+use std::cell::RefCell;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::linalg::qr::no_pivoting::factor;
+use faer::linalg::cholesky::llt;
+use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
+use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::linalg::solvers::DenseSolveCore;
-use faer::{Conj, Mat, Par};
+use faer::reborrow::IntoConst;
+use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
 
 /// The fundamental solution of the Laplacian in `D` dimensions (up to a
 /// constant factor): `log r` in 2D, `1/r` in 3D.
@@ -90,6 +105,65 @@ fn distance<const D: usize>(a: [f64; D], b: [f64; D]) -> f64 {
     (0..D).map(|i| (a[i] - b[i]) * (a[i] - b[i])).sum::<f64>().sqrt()
 }
 
+/// The fit's arrays, kept per thread and reused: a 24-node element's
+/// system is about 1.5 MB, and allocated afresh for every element its
+/// pages were returned and faulted in again each time.
+#[derive(Default)]
+struct Workspace {
+    /// The kernel matrix, a copy for the QR factorisation, the right-hand
+    /// sides, the normal equations' matrix and the fitted values, one after
+    /// another.
+    values: Vec<f64>,
+    /// faer's scratch and its size (bytes).
+    stack: Option<(usize, MemBuffer)>,
+}
+
+impl Workspace {
+    /// Slices of the given lengths, from storage grown as needed (its old
+    /// contents left: every caller overwrites what it reads).
+    fn arrays<const N: usize>(values: &mut Vec<f64>, lengths: [usize; N]) -> [&mut [f64]; N] {
+        let total = lengths.iter().sum();
+        if values.len() < total {
+            values.resize(total, 0.0);
+        }
+        let mut rest = &mut values[..];
+        lengths.map(|len| {
+            let (head, tail) = std::mem::take(&mut rest).split_at_mut(len);
+            rest = tail;
+            head
+        })
+    }
+
+    /// faer's scratch of at least `req`.
+    fn stack(stack: &mut Option<(usize, MemBuffer)>, req: StackReq) -> &mut MemStack {
+        let bytes = req.size_bytes();
+        if stack.as_ref().is_none_or(|(have, _)| *have < bytes) {
+            *stack = Some((bytes, MemBuffer::new(req)));
+        }
+        MemStack::new(&mut stack.as_mut().expect("set above").1)
+    }
+}
+
+thread_local! {
+    static WORKSPACE: RefCell<Workspace> = RefCell::default();
+}
+
+/// The largest ratio of the Cholesky factor's diagonal entries (a lower
+/// bound of the condition number of `A`) at which the normal equations are
+/// solved: `10⁵` leaves the relative error of their solution, about
+/// `ε cond(A)²`, far below the fit's own (the kernel matrices of the
+/// harmonic tests stay under `6·10⁴`).
+pub(super) const NORMAL_EQUATIONS_MAX_RATIO: f64 = 1e5;
+
+/// How the least-squares problem was solved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Method {
+    /// Cholesky factorisation of the normal equations.
+    NormalEquations,
+    /// Householder QR factorisation of the kernel matrix.
+    Qr,
+}
+
 /// Fits `k` functions to `targets` (row-major `m x k`) at the scaled
 /// `collocation` points, with kernels at `centres`; `nodes` are the scaled
 /// node positions whose linear functions the result reproduces exactly.
@@ -103,6 +177,18 @@ pub(super) fn fit<const D: usize>(
     targets: &[f64],
     nodes: &[[f64; D]],
 ) -> Option<Fit<D>> {
+    fit_by(centres, collocation, targets, nodes, &[Method::NormalEquations, Method::Qr]).map(|(fit, _)| fit)
+}
+
+/// [`fit`] by the first of `methods` that succeeds (a test compares them);
+/// also returns the method used.
+pub(super) fn fit_by<const D: usize>(
+    centres: Vec<[f64; D]>,
+    collocation: &[[f64; D]],
+    targets: &[f64],
+    nodes: &[[f64; D]],
+    methods: &[Method],
+) -> Option<(Fit<D>, Method)> {
     let (n, m, k) = (centres.len(), collocation.len(), nodes.len());
     let cols = n + D + 1;
     assert_eq!(targets.len(), m * k);
@@ -110,64 +196,139 @@ pub(super) fn fit<const D: usize>(
         return None;
     }
     let row_weight = |i: usize| if i < k { NODE_WEIGHT } else { 1.0 };
-    // filled column by column, as faer stores it, each kernel column by one
-    // loop over the points' coordinates held as separate arrays (it
-    // vectorises; the per-entry closure of `Mat::from_fn` took a fifth of a
-    // 24-node element's build)
     let weights: Vec<f64> = (0..m).map(row_weight).collect();
     let coords: [Vec<f64>; D] = std::array::from_fn(|d| collocation.iter().map(|c| c[d]).collect());
-    let mut a = Mat::<f64>::zeros(m, cols);
-    for j in 0..cols {
-        let column = a.col_mut(j).try_as_col_major_mut().expect("a fresh matrix is column-major").as_slice_mut();
-        match j {
-            j if j < n => kernel_column::<D>(&coords, centres[j], &weights, column),
-            j if j < n + D => column.iter_mut().zip(&weights).zip(&coords[j - n]).for_each(|((v, w), x)| *v = w * x),
-            _ => column.copy_from_slice(&weights),
-        }
-    }
-    let system = a.clone();
-    let mut rhs = Mat::<f64>::from_fn(m, k, |i, a| row_weight(i) * targets[i * k + a]);
     let block = factor::recommended_block_size::<f64>(m, cols);
-    let mut mem = MemBuffer::new(StackReq::any_of(&[
+    let scratch = StackReq::any_of(&[
+        llt::factor::cholesky_in_place_scratch::<f64>(cols, Par::Seq, Default::default()),
         factor::qr_in_place_scratch::<f64>(m, cols, block, Par::Seq, Default::default()),
-        faer::linalg::qr::no_pivoting::solve::solve_lstsq_in_place_scratch::<f64>(m, cols, block, k, Par::Seq),
-    ]));
-    let stack = MemStack::new(&mut mem);
-    let mut h = Mat::<f64>::zeros(block, cols);
-    factor::qr_in_place(a.as_mut(), h.as_mut(), Par::Seq, stack, Default::default());
-    // a rank-deficient R (coincident kernels) makes the solve meaningless
-    let rmax = (0..cols).map(|i| a[(i, i)].abs()).fold(0.0, f64::max);
-    if !(rmax > 0.0) || (0..cols).any(|i| !(a[(i, i)].abs() > 1e-13 * rmax)) {
-        return None;
-    }
-    faer::linalg::qr::no_pivoting::solve::solve_lstsq_in_place_with_conj(
-        a.as_ref(),
-        h.as_ref(),
-        a.as_ref(),
-        Conj::No,
-        rhs.as_mut(),
-        Par::Seq,
-        stack,
-    );
-    let mut coefficients: Vec<f64> = (0..cols).flat_map(|r| (0..k).map(move |c| (r, c))).map(|rc| rhs[rc]).collect();
-    reproduce_linear::<D>(&mut coefficients, n, nodes)?;
-    if !coefficients.iter().all(|c| c.is_finite()) {
-        return None;
-    }
-    // the fit's deviations from the targets, by one matrix product
-    let c = Mat::<f64>::from_fn(cols, k, |r, a| coefficients[r * k + a]);
-    let mut values = Mat::<f64>::zeros(m, k);
-    faer::linalg::matmul::matmul(values.as_mut(), faer::Accum::Replace, system.as_ref(), c.as_ref(), 1.0, Par::Seq);
+        solve::solve_lstsq_in_place_scratch::<f64>(m, cols, block, k, Par::Seq),
+    ]);
+    let mut coefficients = vec![0.0; cols * k];
     let (mut max_error, mut sum_sq) = (0.0f64, 0.0);
-    for i in 0..m {
-        for a in 0..k {
-            let d = values[(i, a)] / row_weight(i) - targets[i * k + a];
-            max_error = max_error.max(d.abs());
-            sum_sq += d * d;
+    let method = WORKSPACE.with_borrow_mut(|work| {
+        let [a, qr, rhs, gram, values] =
+            Workspace::arrays(&mut work.values, [m * cols, m * cols, m * k, cols * cols.max(block), m * k]);
+        let stack = Workspace::stack(&mut work.stack, scratch);
+        // filled column by column, as faer stores it, each kernel column by
+        // one loop over the points' coordinates held as separate arrays (it
+        // vectorises; the per-entry closure of `Mat::from_fn` took a fifth
+        // of a 24-node element's build)
+        for (j, column) in a.chunks_exact_mut(m).enumerate() {
+            match j {
+                j if j < n => kernel_column::<D>(&coords, centres[j], &weights, column),
+                j if j < n + D => {
+                    column.iter_mut().zip(&weights).zip(&coords[j - n]).for_each(|((v, w), x)| *v = w * x)
+                }
+                _ => column.copy_from_slice(&weights),
+            }
         }
-    }
+        for (col, rhs) in rhs.chunks_exact_mut(m).enumerate() {
+            rhs.iter_mut().enumerate().for_each(|(i, r)| *r = weights[i] * targets[i * k + col]);
+        }
+        let a = MatRef::from_column_major_slice(a, m, cols);
+        let rhs = MatMut::from_column_major_slice_mut(rhs, m, k);
+        let solution = |c: &mut [f64], x: MatRef<f64>| {
+            for (r, row) in c.chunks_exact_mut(k).enumerate() {
+                row.iter_mut().enumerate().for_each(|(col, c)| *c = x[(r, col)]);
+            }
+        };
+        let method = methods.iter().copied().find(|method| match method {
+            Method::NormalEquations => {
+                let Some(x) = solve_normal_equations(a, rhs.as_ref(), gram, values, stack) else { return false };
+                solution(&mut coefficients, x);
+                true
+            }
+            Method::Qr => {
+                let Some(x) = solve_qr(a, rhs.as_ref(), qr, gram, values, stack) else { return false };
+                solution(&mut coefficients, x);
+                true
+            }
+        })?;
+        reproduce_linear::<D>(&mut coefficients, n, nodes)?;
+        if !coefficients.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        // the fit's deviations from the targets, by one matrix product
+        let c = MatRef::from_row_major_slice(&coefficients, cols, k);
+        let mut values = MatMut::from_column_major_slice_mut(values, m, k);
+        matmul(values.as_mut(), Accum::Replace, a, c, 1.0, Par::Seq);
+        for i in 0..m {
+            for a in 0..k {
+                let d = values[(i, a)] / weights[i] - targets[i * k + a];
+                max_error = max_error.max(d.abs());
+                sum_sq += d * d;
+            }
+        }
+        Some(method)
+    })?;
     let rms_error = (sum_sq / (m * k) as f64).sqrt();
-    Some(Fit { centres, coefficients, k, max_error, rms_error })
+    Some((Fit { centres, coefficients, k, max_error, rms_error }, method))
+}
+
+/// The least-squares solution of `a x = rhs` by the normal equations
+/// `aᵀa x = aᵀ rhs` (only `aᵀa`'s lower triangle is formed, into `gram`;
+/// `x` is written into `out`, `cols x k`); `None` when the Cholesky factor
+/// fails or its diagonal spans more than [`NORMAL_EQUATIONS_MAX_RATIO`].
+fn solve_normal_equations<'o>(
+    a: MatRef<f64>,
+    rhs: MatRef<f64>,
+    gram: &mut [f64],
+    out: &'o mut [f64],
+    stack: &mut MemStack,
+) -> Option<MatRef<'o, f64>> {
+    let cols = a.ncols();
+    let mut g = MatMut::from_column_major_slice_mut(&mut gram[..cols * cols], cols, cols);
+    let full = BlockStructure::Rectangular;
+    triangular::matmul(
+        g.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        a.transpose(),
+        full,
+        a,
+        full,
+        1.0,
+        Par::Seq,
+    );
+    llt::factor::cholesky_in_place(g.as_mut(), Default::default(), Par::Seq, stack, Default::default()).ok()?;
+    let diagonal = (0..cols).map(|i| g[(i, i)]);
+    let (lo, hi) = diagonal.fold((f64::INFINITY, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
+    if !(lo > 0.0 && hi <= NORMAL_EQUATIONS_MAX_RATIO * lo) {
+        return None;
+    }
+    let mut x = MatMut::from_column_major_slice_mut(&mut out[..cols * rhs.ncols()], cols, rhs.ncols());
+    matmul(x.as_mut(), Accum::Replace, a.transpose(), rhs, 1.0, Par::Seq);
+    llt::solve::solve_in_place_with_conj(g.as_ref(), Conj::No, x.as_mut(), Par::Seq, stack);
+    Some(x.into_const())
+}
+
+/// The least-squares solution of `a x = rhs` by a Householder QR
+/// factorisation of a copy of `a` in `qr` (its block reflectors in `h`);
+/// `x` is written into `out`. `None` when `R` is rank deficient (coincident
+/// kernels make the solve meaningless).
+fn solve_qr<'o>(
+    a: MatRef<f64>,
+    rhs: MatRef<f64>,
+    qr: &mut [f64],
+    h: &mut [f64],
+    out: &'o mut [f64],
+    stack: &mut MemStack,
+) -> Option<MatRef<'o, f64>> {
+    let (m, cols) = a.shape();
+    let block = factor::recommended_block_size::<f64>(m, cols);
+    let mut qr = MatMut::from_column_major_slice_mut(qr, m, cols);
+    qr.copy_from(a);
+    let mut h = MatMut::from_column_major_slice_mut(&mut h[..block * cols], block, cols);
+    factor::qr_in_place(qr.as_mut(), h.as_mut(), Par::Seq, stack, Default::default());
+    let rmax = (0..cols).map(|i| qr[(i, i)].abs()).fold(0.0, f64::max);
+    if !(rmax > 0.0) || (0..cols).any(|i| !(qr[(i, i)].abs() > 1e-13 * rmax)) {
+        return None;
+    }
+    let mut x = MatMut::from_column_major_slice_mut(&mut out[..m * rhs.ncols()], m, rhs.ncols());
+    x.copy_from(rhs);
+    solve::solve_lstsq_in_place_with_conj(qr.as_ref(), h.as_ref(), qr.as_ref(), Conj::No, x.as_mut(), Par::Seq, stack);
+    Some(x.into_const().subrows(0, cols))
 }
 
 /// Projects the coefficients (row-major `(n + D + 1) x k`) onto the affine
@@ -195,4 +356,75 @@ fn reproduce_linear<const D: usize>(c: &mut [f64], n: usize, nodes: &[[f64; D]])
         }
     }
     Some(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fit of the trilinear functions of the cube `[-1/2, 1/2]³` on its
+    /// surface, with kernels `0.1` outside it: nodes, then a grid of each
+    /// face at spacing `1/8` (collocation) or `1/4` (kernels).
+    fn cube_problem() -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>, Vec<[f64; 3]>) {
+        let nodes: Vec<[f64; 3]> =
+            (0..8).map(|i| [i & 1, (i >> 1) & 1, (i >> 2) & 1].map(|b| b as f64 - 0.5)).collect();
+        let trilinear = |p: [f64; 3]| -> Vec<f64> {
+            nodes.iter().map(|x| (0..3).map(|d| 0.5 + 2.0 * x[d] * p[d]).product()).collect()
+        };
+        let face_grid = |steps: usize, offset: f64| {
+            let mut points = Vec::new();
+            for axis in 0..3 {
+                for side in [-0.5f64, 0.5] {
+                    for i in 0..=steps {
+                        for j in 0..=steps {
+                            let (u, v) = (i as f64 / steps as f64 - 0.5, j as f64 / steps as f64 - 0.5);
+                            let mut p = [0.0; 3];
+                            p[axis] = side + offset * side.signum();
+                            p[(axis + 1) % 3] = u;
+                            p[(axis + 2) % 3] = v;
+                            points.push(p);
+                        }
+                    }
+                }
+            }
+            points
+        };
+        let mut collocation = nodes.clone();
+        collocation.extend(face_grid(8, 0.0));
+        let targets = collocation.iter().flat_map(|&p| trilinear(p)).collect();
+        (face_grid(4, 0.1), collocation, targets, nodes)
+    }
+
+    #[test]
+    fn normal_equations_agree_with_qr() {
+        let (centres, collocation, targets, nodes) = cube_problem();
+        let by = |method| fit_by(centres.clone(), &collocation, &targets, &nodes, &[method]).expect("a fit");
+        let ((normal, used), (qr, _)) = (by(Method::NormalEquations), by(Method::Qr));
+        assert_eq!(used, Method::NormalEquations);
+        let default = fit(centres.clone(), &collocation, &targets, &nodes).expect("a fit");
+        assert_eq!(default.coefficients, normal.coefficients, "the default takes the normal equations here");
+        assert!(normal.max_error < 0.05, "the fit itself: {}", normal.max_error);
+        assert!((normal.max_error - qr.max_error).abs() < 1e-9, "{} {}", normal.max_error, qr.max_error);
+        assert!((normal.rms_error - qr.rms_error).abs() < 1e-10, "{} {}", normal.rms_error, qr.rms_error);
+        let (mut a, mut b) = (vec![0.0; 8], vec![0.0; 8]);
+        for i in 0..50 {
+            let t = i as f64 / 49.0;
+            let p = [0.45 * (7.0 * t).sin(), 0.45 * (5.0 * t).cos(), t - 0.5];
+            normal.values(p, &mut a);
+            qr.values(p, &mut b);
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x - y).abs() < 1e-9, "at {p:?}: {x} against {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn coincident_kernels_are_refused_by_both_methods() {
+        let (mut centres, collocation, targets, nodes) = cube_problem();
+        centres.push(centres[3]);
+        for method in [Method::NormalEquations, Method::Qr] {
+            assert!(fit_by(centres.clone(), &collocation, &targets, &nodes, &[method]).is_none(), "{method:?}");
+        }
+        assert!(fit(centres, &collocation, &targets, &nodes).is_none());
+    }
 }
