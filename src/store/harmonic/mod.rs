@@ -49,7 +49,7 @@ pub struct HarmonicOptions {
     /// the element (or face) diameter (martin2008 eq. 12; 0.1).
     pub offset: f64,
     /// Kernel samples inside every edge (3; the collocation points are
-    /// three times as dense).
+    /// 2.5 times as dense on elements, three times on faces).
     pub edge_samples: usize,
     /// Gauss points per direction on each sub-tetrahedron (2: exact for
     /// degree 1; 3: degree 3).
