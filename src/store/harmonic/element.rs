@@ -84,7 +84,8 @@ pub(crate) fn winding_number(verts: &[[f64; 3]], triangles: &[[u32; 3]], p: [f64
     omega / (4.0 * std::f64::consts::PI)
 }
 
-/// A face's plane and the slab around it that holds its triangles.
+/// A face's plane, the slab around it that holds its triangles, and the
+/// half-space that holds the element.
 struct FacePlane {
     /// Outward unit normal.
     normal: [f64; 3],
@@ -93,6 +94,10 @@ struct FacePlane {
     /// How far the face's vertices (and so its triangles) lie from the
     /// plane, at most.
     deviation: f64,
+    /// How far beyond the plane the element's vertices reach, at most
+    /// (rounding for a convex element): the element's convex hull, and so
+    /// the element, lies in `normal · x <= offset + hull`.
+    hull: f64,
     /// The face's triangles, as a range of the element's.
     triangles: std::ops::Range<usize>,
 }
@@ -103,29 +108,14 @@ struct Boundary<'a> {
     verts: &'a [[f64; 3]],
     triangles: &'a [[u32; 3]],
     faces: Vec<FacePlane>,
-    /// Whether every vertex lies on the inner side of every face's plane:
-    /// then a point outside one plane is outside the element.
-    convex: bool,
 }
 
-impl<'a> Boundary<'a> {
-    /// A fold shallower than this (in units of the diameter) still counts
-    /// as convex: planar faces deviate from their plane by rounding.
-    const CONVEX_TOLERANCE: f64 = 1e-9;
-
-    fn new(verts: &'a [[f64; 3]], triangles: &'a [[u32; 3]], faces: Vec<FacePlane>) -> Self {
-        let convex = faces.iter().all(|f| {
-            f.deviation <= Self::CONVEX_TOLERANCE
-                && verts.iter().all(|&v| dot(f.normal, v) - f.offset <= Self::CONVEX_TOLERANCE)
-        });
-        Boundary { verts, triangles, faces, convex }
-    }
-
+impl Boundary<'_> {
     /// Whether `c` lies outside the element, at least `clearance` from its
     /// surface. A face whose slab is `clearance` or more from `c` has its
-    /// triangles as far; only the others' are measured. Outside is decided
-    /// by the faces' planes for a convex element, else by the winding
-    /// number.
+    /// triangles as far; only the others' are measured. A point beyond a
+    /// face's half-space is outside the element's convex hull; only the
+    /// others (near a fold of a non-convex element) take a winding number.
     fn clear_outside(&self, c: [f64; 3], clearance: f64) -> bool {
         let clear = self.faces.iter().all(|f| {
             (dot(f.normal, c) - f.offset).abs() - f.deviation >= clearance
@@ -134,11 +124,8 @@ impl<'a> Boundary<'a> {
                     .all(|t| point_triangle_distance(c, &t.map(|i| self.verts[i as usize])) >= clearance)
         });
         clear
-            && if self.convex {
-                self.faces.iter().any(|f| dot(f.normal, c) > f.offset)
-            } else {
-                winding_number(self.verts, self.triangles, c) < 0.5
-            }
+            && (self.faces.iter().any(|f| dot(f.normal, c) - f.offset > f.hull)
+                || winding_number(self.verts, self.triangles, c) < 0.5)
     }
 }
 
@@ -214,11 +201,12 @@ pub fn element_basis(
         let on_face: Vec<f64> = face.vertices.iter().map(|&v| dot(normal, scaled[local(v)])).collect();
         let offset = on_face.iter().sum::<f64>() / on_face.len() as f64;
         let deviation = on_face.iter().map(|h| (h - offset).abs()).fold(0.0, f64::max);
+        let hull = scaled.iter().map(|&v| dot(normal, v) - offset).fold(0.0, f64::max);
         let triangles = first_triangle..first_triangle + face.triangles.len();
         first_triangle = triangles.end;
-        FacePlane { normal, offset, deviation, triangles }
+        FacePlane { normal, offset, deviation, hull, triangles }
     });
-    let boundary = Boundary::new(&scaled, &triangles, face_planes.collect());
+    let boundary = Boundary { verts: &scaled, triangles: &triangles, faces: face_planes.collect() };
     let centres = place_centres(samples, options.offset, |c, clearance| boundary.clear_outside(c, clearance));
     // collocation points and targets
     let mut colloc = Vec::new();
