@@ -362,10 +362,18 @@ fn reproduce_linear<const D: usize>(c: &mut [f64], n: usize, nodes: &[[f64; D]])
 mod tests {
     use super::*;
 
+    /// The inputs of a fit.
+    struct Problem {
+        centres: Vec<[f64; 3]>,
+        collocation: Vec<[f64; 3]>,
+        targets: Vec<f64>,
+        nodes: Vec<[f64; 3]>,
+    }
+
     /// The fit of the trilinear functions of the cube `[-1/2, 1/2]³` on its
     /// surface, with kernels `0.1` outside it: nodes, then a grid of each
     /// face at spacing `1/8` (collocation) or `1/4` (kernels).
-    fn cube_problem() -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>, Vec<[f64; 3]>) {
+    fn cube_problem() -> Problem {
         let nodes: Vec<[f64; 3]> =
             (0..8).map(|i| [i & 1, (i >> 1) & 1, (i >> 2) & 1].map(|b| b as f64 - 0.5)).collect();
         let trilinear = |p: [f64; 3]| -> Vec<f64> {
@@ -392,12 +400,12 @@ mod tests {
         let mut collocation = nodes.clone();
         collocation.extend(face_grid(8, 0.0));
         let targets = collocation.iter().flat_map(|&p| trilinear(p)).collect();
-        (face_grid(4, 0.1), collocation, targets, nodes)
+        Problem { centres: face_grid(4, 0.1), collocation, targets, nodes }
     }
 
     #[test]
     fn normal_equations_agree_with_qr() {
-        let (centres, collocation, targets, nodes) = cube_problem();
+        let Problem { centres, collocation, targets, nodes } = cube_problem();
         let by = |method| fit_by(centres.clone(), &collocation, &targets, &nodes, &[method]).expect("a fit");
         let ((normal, used), (qr, _)) = (by(Method::NormalEquations), by(Method::Qr));
         assert_eq!(used, Method::NormalEquations);
@@ -420,7 +428,7 @@ mod tests {
 
     #[test]
     fn coincident_kernels_are_refused_by_both_methods() {
-        let (mut centres, collocation, targets, nodes) = cube_problem();
+        let Problem { mut centres, collocation, targets, nodes } = cube_problem();
         centres.push(centres[3]);
         for method in [Method::NormalEquations, Method::Qr] {
             assert!(fit_by(centres.clone(), &collocation, &targets, &nodes, &[method]).is_none(), "{method:?}");
