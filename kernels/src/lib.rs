@@ -29,6 +29,7 @@ pub mod elasticity;
 pub mod envelope;
 pub mod harmonic;
 pub mod lanes;
+pub mod logarithm;
 
 /// The widest SIMD register the kernels run on, in `f64` lanes (AVX-512):
 /// workspace requests are sized for it.

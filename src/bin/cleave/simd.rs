@@ -11,7 +11,7 @@
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
-use cleave_kernels::{elasticity, envelope, harmonic, moments, polynomial, rotation, spmv};
+use cleave_kernels::{elasticity, envelope, harmonic, logarithm, moments, polynomial, rotation, spmv};
 
 use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
 
@@ -81,6 +81,26 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                     for &c in &centres {
                         fill(coords, c, &row_weights, &mut column);
                     }
+                }
+            });
+            ms
+        }),
+    });
+
+    // the logarithms of a polygonal face's 2D MFS matrix (84 points, 28
+    // centres: squared distances from 1e-3 to 4)
+    let squared: Vec<f64> = (0..84 * 28).map(|i| 2.0 + 1.999 * noise(5 * i + 1)).collect();
+    let mut logs = squared.clone();
+    let reps = 100 * scale;
+    kernels.push(Kernel {
+        name: "logarithm",
+        size: format!("{reps} x {} values", squared.len()),
+        run: Box::new(move |reference| {
+            let ln = if reference { logarithm::ln_in_place_scalar } else { logarithm::ln_in_place };
+            let (ms, ()) = best_ms(3, || {
+                for _ in 0..reps {
+                    logs.copy_from_slice(&squared);
+                    ln(&mut logs);
                 }
             });
             ms

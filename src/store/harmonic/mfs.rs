@@ -38,12 +38,15 @@ use faer::reborrow::IntoConst;
 use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
 
 /// The fundamental solution of the Laplacian in `D` dimensions (up to a
-/// constant factor): `log r` in 2D, `1/r` in 3D.
-fn kernel<const D: usize>(r: f64) -> f64 {
+/// constant factor), `ψ(r) = ln r` in 2D and `1/r` in 3D, in place of each
+/// squared distance `r²` of `values` (in 2D as `½ ln r²`, by the vectorised
+/// logarithm of [`cleave_kernels::logarithm`]).
+fn kernel_of_squared<const D: usize>(values: &mut [f64]) {
     if D == 2 {
-        r.ln()
+        cleave_kernels::logarithm::ln_in_place(values);
+        values.iter_mut().for_each(|v| *v *= 0.5);
     } else {
-        1.0 / r
+        values.iter_mut().for_each(|v| *v = 1.0 / v.sqrt());
     }
 }
 
@@ -69,12 +72,20 @@ pub(super) struct Fit<const D: usize> {
 impl<const D: usize> Fit<D> {
     /// Values of every function at the scaled point `x` into `out` (`k`).
     pub fn values(&self, x: [f64; D], out: &mut [f64]) {
+        const CHUNK: usize = 32;
         let (n, k) = (self.centres.len(), self.k);
         out.fill(0.0);
-        for (j, c) in self.centres.iter().enumerate() {
-            let psi = kernel::<D>(distance(x, *c));
-            for (o, w) in out.iter_mut().zip(&self.coefficients[j * k..(j + 1) * k]) {
-                *o += w * psi;
+        let mut psi = [0.0; CHUNK];
+        for (chunk, centres) in self.centres.chunks(CHUNK).enumerate() {
+            let psi = &mut psi[..centres.len()];
+            for (p, c) in psi.iter_mut().zip(centres) {
+                *p = (0..D).map(|i| (x[i] - c[i]) * (x[i] - c[i])).sum::<f64>();
+            }
+            kernel_of_squared::<D>(psi);
+            for (j, psi) in (chunk * CHUNK..).zip(psi.iter()) {
+                for (o, w) in out.iter_mut().zip(&self.coefficients[j * k..(j + 1) * k]) {
+                    *o += w * psi;
+                }
             }
         }
         for i in 0..=D {
@@ -87,22 +98,18 @@ impl<const D: usize> Fit<D> {
 }
 
 /// `out_i = w_i ψ(|x_i - c|)` for the points `x_i` given by coordinate
-/// (`coords[d][i]`): the kernel column of centre `c`, the same values as
-/// `w_i * kernel(distance(x_i, c))` (in 3D by the dispatched kernel of
-/// [`cleave_kernels::harmonic::kernel_column`]).
+/// (`coords[d][i]`): the kernel column of centre `c` (in 3D by the
+/// dispatched kernel of [`cleave_kernels::harmonic::kernel_column`]).
 fn kernel_column<const D: usize>(coords: &[Vec<f64>; D], c: [f64; D], weights: &[f64], out: &mut [f64]) {
     if let (Some(coords), Some(c)) = (<&[Vec<f64>; 3]>::try_from(&coords[..]).ok(), <[f64; 3]>::try_from(&c[..]).ok()) {
         cleave_kernels::harmonic::kernel_column([&coords[0], &coords[1], &coords[2]], c, weights, out);
     } else {
         for (i, v) in out.iter_mut().enumerate() {
-            let r2 = (0..D).map(|d| (coords[d][i] - c[d]) * (coords[d][i] - c[d])).sum::<f64>();
-            *v = weights[i] * kernel::<D>(r2.sqrt());
+            *v = (0..D).map(|d| (coords[d][i] - c[d]) * (coords[d][i] - c[d])).sum::<f64>();
         }
+        kernel_of_squared::<D>(out);
+        out.iter_mut().zip(weights).for_each(|(v, w)| *v *= w);
     }
-}
-
-fn distance<const D: usize>(a: [f64; D], b: [f64; D]) -> f64 {
-    (0..D).map(|i| (a[i] - b[i]) * (a[i] - b[i])).sum::<f64>().sqrt()
 }
 
 /// The fit's arrays, kept per thread and reused: a 24-node element's
