@@ -4,14 +4,15 @@
 //! In coordinates scaled to the element (`x̂ = (x - o) / s`, so the fit is
 //! well scaled whatever the units), each of the `k` functions is
 //! `N(x̂) = Σ_j w_j ψ(|x̂ - k̂_j|) + c · x̂ + d` with `ψ(r) = log r` in 2D and
-//! `ψ(r) = 1/r` in 3D. The `m ≈ 3n` collocation equations
+//! `ψ(r) = 1/r` in 3D. The `m` collocation equations (2.5 to 3 per kernel)
 //! `N(ĉ_i) = b(ĉ_i)` (weighted: `W A c = W b`) are solved in the
 //! least-squares sense, once for all `k` right-hand sides (faer, sequential:
 //! the caller runs elements in parallel):
 //!
 //! - by the normal equations `AᵀW²A c = AᵀW²b` and a Cholesky factorisation,
-//!   when the factor's diagonal shows a well-conditioned `A` (the kernel
-//!   matrices of this module have condition numbers of `10³` to `10⁶`, so
+//!   when the factor's diagonal shows a well-conditioned `A` (the element
+//!   kernel matrices of the harmonic tests have condition numbers of `10³`
+//!   to `10⁶`, so
 //!   `AᵀA`'s are far from the `10¹⁶` of double precision; this halves the
 //!   work of a QR factorisation, and the fitted values agree with the QR
 //!   solution's to the digits the fit error has);
