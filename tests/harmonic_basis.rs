@@ -5,16 +5,19 @@
 
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{clipped_box, prism};
-use cleave::store::harmonic::{element_basis, face_bases, star_point, ElementBasis, HarmonicOptions};
+use cleave::store::harmonic::{
+    element_basis, element_basis_measured, face_bases, star_point, ElementBasis, FitError, HarmonicOptions,
+};
 use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use cleave_kernels::harmonic::{evaluate, evaluate_scratch};
 use cleave_kernels::quadrature::cone_rule;
 use proptest::prelude::*;
 
-/// The basis of element 0 of `mesh` and interior points (a cone rule).
-fn basis(mesh: &PolyMesh, options: &HarmonicOptions) -> (ElementBasis, Vec<[f64; 3]>) {
+/// The basis of element 0 of `mesh`, its fit error at the collocation
+/// points, and interior points (a cone rule).
+fn basis(mesh: &PolyMesh, options: &HarmonicOptions) -> (ElementBasis, FitError, Vec<[f64; 3]>) {
     let faces = face_bases(mesh, &[0], options).unwrap();
-    let b = element_basis(mesh, 0, &faces, options).expect("fit");
+    let (b, fit) = element_basis_measured(mesh, 0, &faces, options).expect("fit");
     let el = &mesh.elements[0];
     let verts: Vec<[f64; 3]> = el.nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
     let tris: Vec<[u32; 3]> =
@@ -22,7 +25,7 @@ fn basis(mesh: &PolyMesh, options: &HarmonicOptions) -> (ElementBasis, Vec<[f64;
     let apex = star_point(&verts, &tris, mesh.element_diameter(0)).expect("star-shaped");
     let (mut pts, mut w) = (Vec::new(), Vec::new());
     cone_rule(&verts, &tris, apex, 2, &mut pts, &mut w);
-    (b, pts)
+    (b, fit, pts)
 }
 
 /// A star-shaped (non-convex) polygon with `n` tips, radii alternating.
@@ -163,9 +166,9 @@ proptest! {
         let mesh = clipped_box([0.0; 3], [1.0, 0.8, 1.2], planes, seed).unwrap();
         prop_assume!(shortest_edge(&mesh) > 0.05 * mesh.element_diameter(0));
         let opts = HarmonicOptions::default();
-        let (b, pts) = basis(&mesh, &opts);
+        let (b, fit, pts) = basis(&mesh, &opts);
         let lagrange = check_reproduction(&mesh, &b, &pts)?;
-        prop_assert!(lagrange < MAX_LAGRANGE && b.boundary_rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", b.boundary_rms);
+        prop_assert!(lagrange < MAX_LAGRANGE && fit.rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", fit.rms);
         let (rms, _) = off_collocation_error(&mesh, &b, &opts);
         prop_assert!(rms < MAX_RMS_AWAY, "rms away from the collocation points {rms:.2e}");
     }
@@ -181,15 +184,15 @@ proptest! {
     ) {
         let mesh = prism(&star(tips, r_in, 1.0, twist), height).unwrap();
         let opts = HarmonicOptions::default();
-        let (b, pts) = basis(&mesh, &opts);
+        let (b, fit, pts) = basis(&mesh, &opts);
         let lagrange = check_reproduction(&mesh, &b, &pts)?;
-        prop_assert!(lagrange < MAX_LAGRANGE && b.boundary_rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", b.boundary_rms);
+        prop_assert!(lagrange < MAX_LAGRANGE && fit.rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", fit.rms);
         let (rms, _) = off_collocation_error(&mesh, &b, &opts);
         prop_assert!(rms < MAX_RMS_AWAY, "star: rms away from the collocation points {rms:.2e}");
         let mesh = prism(&l_shape(r_in, 1.0 - r_in), height).unwrap();
-        let (b, pts) = basis(&mesh, &opts);
+        let (b, fit, pts) = basis(&mesh, &opts);
         let lagrange = check_reproduction(&mesh, &b, &pts)?;
-        prop_assert!(lagrange < MAX_LAGRANGE && b.boundary_rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", b.boundary_rms);
+        prop_assert!(lagrange < MAX_LAGRANGE && fit.rms < MAX_RMS, "lagrange {lagrange:.2e} rms {:.2e}", fit.rms);
         let (rms, _) = off_collocation_error(&mesh, &b, &opts);
         prop_assert!(rms < MAX_RMS_AWAY, "L: rms away from the collocation points {rms:.2e}");
     }
@@ -203,16 +206,32 @@ fn boundary_error_falls_with_more_kernels() {
     for samples in [1, 2, 3, 5] {
         let opts = HarmonicOptions { edge_samples: samples, ..Default::default() };
         let t = std::time::Instant::now();
-        let (b, _) = basis(&mesh, &opts);
+        let (b, fit, _) = basis(&mesh, &opts);
         let (rms, max) = off_collocation_error(&mesh, &b, &opts);
         println!(
             "star prism (k = {}), {samples} samples per edge ({:.2} ms): {} kernels, error rms {:.2e} at the collocation points, rms {rms:.2e} (max {max:.2e}) away from them",
             b.linear.len(),
             t.elapsed().as_secs_f64() * 1e3,
             b.centres.len(),
-            b.boundary_rms,
+            fit.rms,
         );
         assert!(rms < last, "{samples} samples: rms {rms} not below {last}");
         last = rms;
     }
+}
+
+/// The element store's fit, which skips measuring the error, gives the
+/// same functions, bit for bit.
+#[test]
+fn measuring_the_fit_error_changes_nothing_else() {
+    let mesh = prism(&star(4, 0.5, 1.0, 0.1), 0.7).unwrap();
+    let options = HarmonicOptions::default();
+    let faces = face_bases(&mesh, &[0], &options).unwrap();
+    let plain = element_basis(&mesh, 0, &faces, &options).expect("fit");
+    let (measured, fit) = element_basis_measured(&mesh, 0, &faces, &options).expect("fit");
+    assert_eq!(
+        (&plain.centres, &plain.weights, &plain.linear),
+        (&measured.centres, &measured.weights, &measured.linear)
+    );
+    assert!(fit.rms > 0.0 && fit.rms <= fit.max && fit.max < 0.25, "{fit:?}");
 }

@@ -16,7 +16,7 @@ use cleave_kernels::harmonic::MfsFunctions;
 use cleave_kernels::vec3::{add, cross, dot, norm, point_triangle_distance, scale, sub};
 
 use super::face::{place_centres, FaceBasis};
-use super::mfs::fit;
+use super::mfs::{fit, FitError};
 use super::HarmonicOptions;
 use crate::mesh::face_geometry;
 use crate::mesh::PolyMesh;
@@ -45,11 +45,6 @@ pub struct ElementBasis {
     pub linear: Vec<[f64; 4]>,
     /// Origin of the linear parts (m).
     pub origin: [f64; 3],
-    /// Largest deviation `|N_a(c) - b_a(c)|` at the collocation points: the
-    /// MFS fit error of the boundary values (dimensionless).
-    pub boundary_error: f64,
-    /// Root mean square of the same deviations.
-    pub boundary_rms: f64,
 }
 
 impl ElementBasis {
@@ -142,6 +137,28 @@ pub fn element_basis(
     faces: &[Option<FaceBasis>],
     options: &HarmonicOptions,
 ) -> Option<ElementBasis> {
+    fit_element(mesh, e, faces, options, false).map(|(basis, _)| basis)
+}
+
+/// [`element_basis`] and the MFS fit's error: how far the functions lie
+/// from their boundary values at the collocation points.
+pub fn element_basis_measured(
+    mesh: &PolyMesh,
+    e: usize,
+    faces: &[Option<FaceBasis>],
+    options: &HarmonicOptions,
+) -> Option<(ElementBasis, FitError)> {
+    fit_element(mesh, e, faces, options, true).and_then(|(basis, error)| Some((basis, error?)))
+}
+
+/// The fit of [`element_basis`], with its error when `measure`.
+fn fit_element(
+    mesh: &PolyMesh,
+    e: usize,
+    faces: &[Option<FaceBasis>],
+    options: &HarmonicOptions,
+    measure: bool,
+) -> Option<(ElementBasis, Option<FitError>)> {
     let el = &mesh.elements[e];
     let k = el.nodes.len();
     let x: Vec<[f64; 3]> = el.nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
@@ -248,18 +265,17 @@ pub fn element_basis(
             },
         );
     }
-    let fitted = fit::<3>(centres, &colloc, &targets, &scaled)?;
+    let (fitted, error) = fit::<3>(centres, &colloc, &targets, &scaled, measure)?;
     let n = fitted.centres.len();
     // back to world units: 1/|x̂ - k̂| = s/|x - k|, c·x̂ = (c/s)·(x - o)
     let c = &fitted.coefficients;
-    Some(ElementBasis {
+    let basis = ElementBasis {
         centres: fitted.centres.iter().map(|&p| add(origin, scale(p, size))).collect(),
         weights: c[..n * k].iter().map(|w| w * size).collect(),
         linear: (0..k)
             .map(|a| [c[n * k + a] / size, c[(n + 1) * k + a] / size, c[(n + 2) * k + a] / size, c[(n + 3) * k + a]])
             .collect(),
         origin,
-        boundary_error: fitted.max_error,
-        boundary_rms: fitted.rms_error,
-    })
+    };
+    Some((basis, error))
 }

@@ -292,7 +292,7 @@ fn planar_mfs(
         origin: centroid,
         axes: [u, v],
         scale: diameter,
-        fit: Fit { centres: Vec::new(), coefficients: Vec::new(), k: kf, max_error: 0.0, rms_error: 0.0 },
+        fit: Fit { centres: Vec::new(), coefficients: Vec::new(), k: kf },
     };
     let poly = Polygon { pts: loop_pts.iter().map(|&p| mfs.local(p)).collect() };
     if !(diameter > 0.0) || poly.pts.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
@@ -344,6 +344,6 @@ fn planar_mfs(
             }));
         }
     }
-    mfs.fit = fit(centres, &colloc, &targets, &poly.pts)?;
+    mfs.fit = fit(centres, &colloc, &targets, &poly.pts, false)?.0;
     Some(mfs)
 }

@@ -64,10 +64,16 @@ pub(super) struct Fit<const D: usize> {
     pub coefficients: Vec<f64>,
     /// Number of functions.
     pub k: usize,
-    /// Largest deviation `|N_a(c_i) - b_a(c_i)|` at the collocation points.
-    pub max_error: f64,
-    /// Root mean square of the same deviations.
-    pub rms_error: f64,
+}
+
+/// How far fitted functions lie from their targets at the collocation
+/// points (dimensionless: the targets are shape function values).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitError {
+    /// Largest deviation `|N_a(c_i) - b_a(c_i)|`.
+    pub max: f64,
+    /// Root mean square of the deviations.
+    pub rms: f64,
 }
 
 impl<const D: usize> Fit<D> {
@@ -178,14 +184,19 @@ pub(super) enum Method {
 /// The first `k` collocation points must be the nodes: their equations
 /// weigh [`NODE_WEIGHT`] times more, which keeps the Lagrange property
 /// `N_a(x_b) ≈ δ_ab` where the hat functions' kinks make the fit hardest.
+/// With `measure`, also returns the fit's error (one more product of the
+/// kernel matrix with the coefficients, about a tenth of the fit: the
+/// element store, which never reads it, skips it).
 /// Returns `None` when the system is rank deficient or the result not finite.
 pub(super) fn fit<const D: usize>(
     centres: Vec<[f64; D]>,
     collocation: &[[f64; D]],
     targets: &[f64],
     nodes: &[[f64; D]],
-) -> Option<Fit<D>> {
-    fit_by(centres, collocation, targets, nodes, &[Method::NormalEquations, Method::Qr]).map(|(fit, _)| fit)
+    measure: bool,
+) -> Option<(Fit<D>, Option<FitError>)> {
+    let methods = [Method::NormalEquations, Method::Qr];
+    fit_by(centres, collocation, targets, nodes, &methods, measure).map(|(fit, _, error)| (fit, error))
 }
 
 /// [`fit`] by the first of `methods` that succeeds (a test compares them);
@@ -196,7 +207,8 @@ pub(super) fn fit_by<const D: usize>(
     targets: &[f64],
     nodes: &[[f64; D]],
     methods: &[Method],
-) -> Option<(Fit<D>, Method)> {
+    measure: bool,
+) -> Option<(Fit<D>, Method, Option<FitError>)> {
     let (n, m, k) = (centres.len(), collocation.len(), nodes.len());
     let cols = n + D + 1;
     assert_eq!(targets.len(), m * k);
@@ -257,6 +269,9 @@ pub(super) fn fit_by<const D: usize>(
         if !coefficients.iter().all(|c| c.is_finite()) {
             return None;
         }
+        if !measure {
+            return Some(method);
+        }
         // the fit's deviations from the targets, by one matrix product
         let c = MatRef::from_row_major_slice(&coefficients, cols, k);
         let mut values = MatMut::from_column_major_slice_mut(values, m, k);
@@ -270,8 +285,8 @@ pub(super) fn fit_by<const D: usize>(
         }
         Some(method)
     })?;
-    let rms_error = (sum_sq / (m * k) as f64).sqrt();
-    Some((Fit { centres, coefficients, k, max_error, rms_error }, method))
+    let error = measure.then(|| FitError { max: max_error, rms: (sum_sq / (m * k) as f64).sqrt() });
+    Some((Fit { centres, coefficients, k }, method, error))
 }
 
 /// The least-squares solution of `a x = rhs` by the normal equations
@@ -414,14 +429,16 @@ mod tests {
     #[test]
     fn normal_equations_agree_with_qr() {
         let Problem { centres, collocation, targets, nodes } = cube_problem();
-        let by = |method| fit_by(centres.clone(), &collocation, &targets, &nodes, &[method]).expect("a fit");
-        let ((normal, used), (qr, _)) = (by(Method::NormalEquations), by(Method::Qr));
+        let by = |method| fit_by(centres.clone(), &collocation, &targets, &nodes, &[method], true).expect("a fit");
+        let ((normal, used, normal_error), (qr, _, qr_error)) = (by(Method::NormalEquations), by(Method::Qr));
         assert_eq!(used, Method::NormalEquations);
-        let default = fit(centres.clone(), &collocation, &targets, &nodes).expect("a fit");
+        let (normal_error, qr_error) = (normal_error.expect("measured"), qr_error.expect("measured"));
+        let (default, unmeasured) = fit(centres.clone(), &collocation, &targets, &nodes, false).expect("a fit");
         assert_eq!(default.coefficients, normal.coefficients, "the default takes the normal equations here");
-        assert!(normal.max_error < 0.05, "the fit itself: {}", normal.max_error);
-        assert!((normal.max_error - qr.max_error).abs() < 1e-9, "{} {}", normal.max_error, qr.max_error);
-        assert!((normal.rms_error - qr.rms_error).abs() < 1e-10, "{} {}", normal.rms_error, qr.rms_error);
+        assert_eq!(unmeasured, None);
+        assert!(normal_error.max < 0.05, "the fit itself: {normal_error:?}");
+        assert!((normal_error.max - qr_error.max).abs() < 1e-9, "{normal_error:?} {qr_error:?}");
+        assert!((normal_error.rms - qr_error.rms).abs() < 1e-10, "{normal_error:?} {qr_error:?}");
         let (mut a, mut b) = (vec![0.0; 8], vec![0.0; 8]);
         for i in 0..50 {
             let t = i as f64 / 49.0;
@@ -439,8 +456,8 @@ mod tests {
         let Problem { mut centres, collocation, targets, nodes } = cube_problem();
         centres.push(centres[3]);
         for method in [Method::NormalEquations, Method::Qr] {
-            assert!(fit_by(centres.clone(), &collocation, &targets, &nodes, &[method]).is_none(), "{method:?}");
+            assert!(fit_by(centres.clone(), &collocation, &targets, &nodes, &[method], true).is_none(), "{method:?}");
         }
-        assert!(fit(centres, &collocation, &targets, &nodes).is_none());
+        assert!(fit(centres, &collocation, &targets, &nodes, false).is_none());
     }
 }

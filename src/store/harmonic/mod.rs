@@ -35,8 +35,9 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 
 pub(crate) use element::winding_number;
-pub use element::{element_basis, ElementBasis};
+pub use element::{element_basis, element_basis_measured, ElementBasis};
 pub use face::{FaceBasis, FaceFunction};
+pub use mfs::FitError;
 
 use super::{fill_batch, BasisError, Batch, ElementKind, Slots};
 use crate::material::Material;
