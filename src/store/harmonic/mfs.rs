@@ -121,12 +121,14 @@ fn kernel_column<const D: usize>(coords: &[Vec<f64>; D], c: [f64; D], weights: &
 
 /// The fit's arrays, kept per thread and reused: a 24-node element's
 /// system is about 1.5 MB, and allocated afresh for every element its
-/// pages were returned and faulted in again each time.
+/// pages were returned and faulted in again each time. They keep the size
+/// of the largest fit the thread has made (the 40-node bench element's:
+/// about 7 MB).
 #[derive(Default)]
 struct Workspace {
-    /// The kernel matrix, a copy for the QR factorisation, the right-hand
-    /// sides, the normal equations' matrix and the fitted values, one after
-    /// another.
+    /// The kernel matrix, the right-hand sides, the normal equations'
+    /// matrix and the fitted values, one after another (the QR
+    /// factorisation, rarely needed, allocates its copy of the matrix).
     values: Vec<f64>,
     /// faer's scratch and its size (bytes).
     stack: Option<(usize, MemBuffer)>,
@@ -227,8 +229,8 @@ pub(super) fn fit_by<const D: usize>(
     let mut coefficients = vec![0.0; cols * k];
     let (mut max_error, mut sum_sq) = (0.0f64, 0.0);
     let method = WORKSPACE.with_borrow_mut(|work| {
-        let [a, qr, rhs, gram, values] =
-            Workspace::arrays(&mut work.values, [m * cols, m * cols, m * k, cols * cols.max(block), m * k]);
+        let [a, rhs, gram, values] =
+            Workspace::arrays(&mut work.values, [m * cols, m * k, cols * cols.max(block), m * k]);
         let stack = Workspace::stack(&mut work.stack, scratch);
         // filled column by column, as faer stores it, each kernel column by
         // one loop over the points' coordinates held as separate arrays (it
@@ -260,7 +262,7 @@ pub(super) fn fit_by<const D: usize>(
                 true
             }
             Method::Qr => {
-                let Some(x) = solve_qr(a, rhs.as_ref(), qr, gram, values, stack) else { return false };
+                let Some(x) = solve_qr(a, rhs.as_ref(), gram, values, stack) else { return false };
                 solution(&mut coefficients, x);
                 true
             }
@@ -327,21 +329,19 @@ fn solve_normal_equations<'o>(
 }
 
 /// The least-squares solution of `a x = rhs` by a Householder QR
-/// factorisation of a copy of `a` in `qr` (its block reflectors in `h`);
+/// factorisation of a copy of `a` (its block reflectors in `h`);
 /// `x` is written into `out`. `None` when `R` is rank deficient (coincident
 /// kernels make the solve meaningless).
 fn solve_qr<'o>(
     a: MatRef<f64>,
     rhs: MatRef<f64>,
-    qr: &mut [f64],
     h: &mut [f64],
     out: &'o mut [f64],
     stack: &mut MemStack,
 ) -> Option<MatRef<'o, f64>> {
     let (m, cols) = a.shape();
     let block = factor::recommended_block_size::<f64>(m, cols);
-    let mut qr = MatMut::from_column_major_slice_mut(qr, m, cols);
-    qr.copy_from(a);
+    let mut qr = a.to_owned();
     let mut h = MatMut::from_column_major_slice_mut(&mut h[..block * cols], block, cols);
     factor::qr_in_place(qr.as_mut(), h.as_mut(), Par::Seq, stack, Default::default());
     let rmax = (0..cols).map(|i| qr[(i, i)].abs()).fold(0.0, f64::max);
