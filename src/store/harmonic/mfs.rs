@@ -451,6 +451,21 @@ mod tests {
         }
     }
 
+    /// Two kernels `10⁻⁷` apart make the normal equations untrustworthy;
+    /// the fit then takes the QR factorisation, which still fits.
+    #[test]
+    fn clustered_kernels_fall_back_to_qr() {
+        let Problem { mut centres, collocation, targets, nodes } = cube_problem();
+        centres.push([centres[3][0] + 1e-7, centres[3][1], centres[3][2]]);
+        let normal = fit_by(centres.clone(), &collocation, &targets, &nodes, &[Method::NormalEquations], false);
+        assert!(normal.is_none(), "the normal equations must refuse");
+        let methods = [Method::NormalEquations, Method::Qr];
+        let (_, used, error) = fit_by(centres, &collocation, &targets, &nodes, &methods, true).expect("a QR fit");
+        assert_eq!(used, Method::Qr);
+        let error = error.expect("measured");
+        assert!(error.max < 0.05, "{error:?}");
+    }
+
     #[test]
     fn coincident_kernels_are_refused_by_both_methods() {
         let Problem { mut centres, collocation, targets, nodes } = cube_problem();
