@@ -8,6 +8,7 @@ mod cg;
 mod cholesky;
 mod coarse;
 mod envelope;
+mod tree_solve;
 
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
 pub use cholesky::{Cholesky, PARALLEL_CHOLESKY_MIN_UNKNOWNS};
