@@ -6,12 +6,13 @@
 //!
 //! Block row `i` of block column `j` holds, in scalar column `3 j + c`, the
 //! three entries `A[3 i + r][3 j + c]` one after the other; by symmetry
-//! `y[3 j + c] = Σ_i Σ_r A[3 i + r][3 j + c] x[3 i + r]`. The kernel keeps
-//! one running sum per entry of the block, `acc[c][r]`, as four lanes (the
-//! fourth multiplies the next stored value by a zero of `x`), so that the
-//! three lanes of a column are one vector operation at AVX2 width, and adds
-//! the lanes of each `c` in order at the end: the same arithmetic in the
-//! same order at every instruction set, so the same bits.
+//! `y[3 j + c] = Σ_i Σ_r A[3 i + r][3 j + c] x[3 i + r]`: each scalar
+//! column, a contiguous run of values, dotted with the same gathered
+//! entries of `x`. The kernel gathers them once per block column (in
+//! segments of at most [`SEGMENT`] block rows), then takes the three dot
+//! products [`LANES`] values at a time, one running sum per lane, and adds
+//! the lanes in a fixed order at the end: the same arithmetic in the same
+//! order at every instruction set, so the same bits.
 
 use crate::lanes::dispatch;
 
@@ -50,8 +51,7 @@ pub struct BlockColumns<'a> {
 
 /// `y_j = (A x)_j` for the block columns `first..first + y.len() / 3` of
 /// `values` on `structure`; returns `Σ_j x_j · y_j` over those columns,
-/// summed in order. Every value must be finite (the padding lane multiplies
-/// a stored value by zero).
+/// summed in order.
 pub fn block_products<T: Value>(
     structure: BlockColumns<'_>,
     values: &[T],
@@ -61,6 +61,13 @@ pub fn block_products<T: Value>(
 ) -> f64 {
     dispatch(Products { structure, values, x, first, y })
 }
+
+/// Lanes of the running sums of a column's dot product (the width of an
+/// AVX-512 vector of `f64`, two of AVX2).
+const LANES: usize = 8;
+
+/// Block rows gathered at a time (a column's `x` entries on the stack).
+const SEGMENT: usize = 64;
 
 struct Products<'a, T> {
     structure: BlockColumns<'a>,
@@ -77,39 +84,36 @@ impl<T: Value> pulp::WithSimd for Products<'_, T> {
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
         let Products { structure, values, x, first, y } = self;
         let mut dot = 0.0;
+        let mut gathered = [0.0f64; 3 * SEGMENT];
         for (q, yj) in y.chunks_exact_mut(3).enumerate() {
             let j = first + q;
             let rows = &structure.rows[structure.ptr[j] as usize..structure.ptr[j + 1] as usize];
             let stride = 3 * rows.len();
             let column = &values[structure.start[j]..structure.start[j] + 3 * stride];
-            let mut acc = [[0.0f64; 4]; 3];
-            let lane = |v: &[T], xi: &[f64; 4], a: &mut [f64; 4]| {
-                for r in 0..4 {
-                    a[r] += v[r].to_f64() * xi[r];
+            let mut acc = [[0.0f64; LANES]; 3];
+            for (s, segment) in rows.chunks(SEGMENT).enumerate() {
+                let n = 3 * segment.len();
+                for (g, &i) in gathered.chunks_exact_mut(3).zip(segment) {
+                    let i = 3 * i as usize;
+                    g.copy_from_slice(&x[i..i + 3]);
                 }
-            };
-            let xi = |i: u32| {
-                let i = 3 * i as usize;
-                [x[i], x[i + 1], x[i + 2], 0.0]
-            };
-            let Some((&last, most)) = rows.split_last() else { continue };
-            // every block row but the last reads four values per column
-            // (the fourth is the next block row's first)
-            for (p, &i) in most.iter().enumerate() {
-                let xi = xi(i);
-                for (c, a) in acc.iter_mut().enumerate() {
-                    lane(&column[c * stride + 3 * p..c * stride + 3 * p + 4], &xi, a);
-                }
-            }
-            // the last one, whose fourth value may lie past the column
-            let (xl, p) = (xi(last), rows.len() - 1);
-            for (c, a) in acc.iter_mut().enumerate() {
-                for r in 0..3 {
-                    a[r] += column[c * stride + 3 * p + r].to_f64() * xl[r];
+                let offset = 3 * SEGMENT * s;
+                for (c, acc) in acc.iter_mut().enumerate() {
+                    let v = &column[c * stride + offset..c * stride + offset + n];
+                    let (v_lanes, v_tail) = v.split_at(n - n % LANES);
+                    let (g_lanes, g_tail) = gathered[..n].split_at(n - n % LANES);
+                    for (v, g) in v_lanes.chunks_exact(LANES).zip(g_lanes.chunks_exact(LANES)) {
+                        for l in 0..LANES {
+                            acc[l] += v[l].to_f64() * g[l];
+                        }
+                    }
+                    for ((a, v), g) in acc.iter_mut().zip(v_tail).zip(g_tail) {
+                        *a += v.to_f64() * g;
+                    }
                 }
             }
             for (out, a) in yj.iter_mut().zip(acc) {
-                *out = a[0] + a[1] + a[2];
+                *out = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
             }
             dot += x[3 * j] * yj[0] + x[3 * j + 1] * yj[1] + x[3 * j + 2] * yj[2];
         }
@@ -130,13 +134,13 @@ mod tests {
         dense: Vec<Vec<f64>>,
     }
 
-    /// A symmetric matrix of 3x3 blocks on a ring of `n` blocks (each
-    /// coupled to itself and its two neighbours).
-    fn ring(n: usize) -> Ring {
+    /// A symmetric matrix of 3x3 blocks on a ring of `n` blocks, each
+    /// coupled to itself and its `reach` neighbours on either side.
+    fn ring(n: usize, reach: usize) -> Ring {
         let mut dense = vec![vec![0.0; 3 * n]; 3 * n];
         let entry = |i: usize, j: usize| ((i * 7 + j * 13) % 11) as f64 - 5.0 + 0.25 * (i + j) as f64;
         for bj in 0..n {
-            for bi in [bj, (bj + 1) % n, (bj + n - 1) % n] {
+            for bi in (0..=reach).flat_map(|d| [(bj + d) % n, (bj + n - d) % n]) {
                 for r in 0..3 {
                     for c in 0..3 {
                         let (i, j) = (3 * bi + r, 3 * bj + c);
@@ -149,7 +153,8 @@ mod tests {
         }
         let (mut ptr, mut rows, mut start, mut values) = (vec![0u32], Vec::new(), Vec::new(), Vec::new());
         for bj in 0..n {
-            let mut r: Vec<u32> = vec![bj as u32, ((bj + 1) % n) as u32, ((bj + n - 1) % n) as u32];
+            let mut r: Vec<u32> =
+                (0..=reach).flat_map(|d| [((bj + d) % n) as u32, ((bj + n - d) % n) as u32]).collect();
             r.sort_unstable();
             r.dedup();
             start.push(values.len());
@@ -166,14 +171,23 @@ mod tests {
 
     /// Against the dense product, for `f64` and `f32` values, on every
     /// instruction set the machine has (the same bits on each), over
-    /// ranges of block columns as the solver splits them.
+    /// ranges of block columns as the solver splits them: block columns of
+    /// 3 block rows (9 values, one lane group and a tail), 13 and 131 (more
+    /// than two segments).
     #[test]
     fn products_match_the_dense_matrix_on_every_level() {
-        let n = 7;
-        let Ring { ptr, rows, start, values, dense } = ring(n);
+        for (n, reach) in [(7, 1), (20, 6), (140, 65)] {
+            products_match_the_dense_matrix(n, reach);
+        }
+    }
+
+    fn products_match_the_dense_matrix(n: usize, reach: usize) {
+        let Ring { ptr, rows, start, values, dense } = ring(n, reach);
         let structure = BlockColumns { ptr: &ptr, rows: &rows, start: &start };
         let x: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.7).sin()).collect();
         let want: Vec<f64> = dense.iter().map(|row| row.iter().zip(&x).map(|(a, b)| a * b).sum()).collect();
+        // the rounding scale of each row's sum: Σ |a_ij x_j|
+        let scale: Vec<f64> = dense.iter().map(|row| row.iter().zip(&x).map(|(a, b)| (a * b).abs()).sum()).collect();
         let values32: Vec<f32> = values.iter().map(|&v| v as f32).collect();
         let mut bits = None;
         for level in crate::lanes::levels::available("spmv") {
@@ -186,9 +200,10 @@ mod tests {
                         Products { structure, values: &values, x: &x, first: 3, y: tail },
                     );
             crate::lanes::levels::run(level, Products { structure, values: &values32, x: &x, first: 0, y: &mut y32 });
-            for (i, (&got, &w)) in y.iter().zip(&want).enumerate() {
-                assert!((got - w).abs() <= 1e-12 * (1.0 + w.abs()), "{level:?}: y[{i}] = {got}, dense {w}");
-                assert!((y32[i] - w).abs() <= 1e-5 * (1.0 + w.abs()), "{level:?}: f32 y[{i}] = {}, dense {w}", y32[i]);
+            for (i, ((&got, &w), &scale)) in y.iter().zip(&want).zip(&scale).enumerate() {
+                assert!((got - w).abs() <= 1e-14 * scale, "{level:?}: y[{i}] = {got}, dense {w}");
+                // (each value rounded to f32 by at most 2⁻²⁴ of itself)
+                assert!((y32[i] - w).abs() <= 1e-7 * scale, "{level:?}: f32 y[{i}] = {}, dense {w}", y32[i]);
             }
             let want_dot: f64 = x.iter().zip(&want).map(|(a, b)| a * b).sum();
             assert!(
