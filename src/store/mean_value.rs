@@ -5,6 +5,7 @@ use cleave_kernels::quadrature::{
     boundary_moments, consistency_correction, paper_rule, paper_rule_len, reference_rule,
 };
 use cleave_kernels::{elasticity, mean_value};
+use rayon::prelude::*;
 
 use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 
@@ -44,10 +45,9 @@ pub(super) fn build_batch(
         QuadratureRule::Consistent | QuadratureRule::Paper => paper_rule_len(k, nt),
         QuadratureRule::Reference(order) => nt * order.pow(3),
     };
-    for &e in &elements {
-        if !mesh.is_convex(e as usize, CONVEXITY_TOLERANCE) {
-            return Err(BasisError::NonConvex { element: e as usize });
-        }
+    // (in parallel, the first in order named: the same error on any pool)
+    if let Some(&e) = elements.par_iter().find_first(|&&e| !mesh.is_convex(e as usize, CONVEXITY_TOLERANCE)) {
+        return Err(BasisError::NonConvex { element: e as usize });
     }
     let scratch = || Scratch {
         phi: vec![0.0; k * nq],
