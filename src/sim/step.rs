@@ -15,7 +15,7 @@
 //! the first step of a topology, a step allocates nothing.
 
 use crate::assembly::{Constraints, SparsePattern};
-use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverKind};
+use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverChoice, SolverKind};
 use crate::Error;
 
 use super::{rest, Boundary, Discretization, NodeState, Phase, PointMap, Simulation};
@@ -35,6 +35,8 @@ pub struct StepStats {
 /// reuses (sized per topology).
 pub(crate) struct StepSystem {
     solver: Box<dyn LinearSolver>,
+    /// What `solver` is, and its tolerance and iteration cap.
+    made: (SolverChoice, f64, usize),
     /// Whether the solver has analysed this topology's pattern.
     analysed: bool,
     /// Whether the solver holds this topology's rest-state reference.
@@ -69,6 +71,7 @@ impl StepSystem {
     pub fn new(kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) -> Self {
         let mut system = StepSystem {
             solver: make_solver(kind, 0, tolerance, max_iterations),
+            made: (SolverChoice::of(kind, 0), tolerance, max_iterations),
             analysed: false,
             referenced: false,
             values: Vec::new(),
@@ -86,11 +89,15 @@ impl StepSystem {
     }
 
     /// Makes this the system of a new topology's `pattern`, keeping the
-    /// buffers' memory: after a cut the next step writes into pages it
-    /// already has.
+    /// buffers' memory, the solver's too when the same solver serves the
+    /// new size (it analyses the new pattern before the next solve): after
+    /// a cut the next step writes into pages it already has.
     pub fn renew(&mut self, kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) {
         let n = 3 * pattern.num_blocks;
-        self.solver = make_solver(kind, n, tolerance, max_iterations);
+        let made = (SolverChoice::of(kind, n), tolerance, max_iterations);
+        if made != self.made {
+            (self.solver, self.made) = (make_solver(kind, n, tolerance, max_iterations), made);
+        }
         (self.analysed, self.referenced) = (false, false);
         // (every value is written by the next assembly, every entry of the
         // vectors by the next step: only their lengths matter)

@@ -456,32 +456,40 @@ impl LinearSolver for ConjugateGradient {
         if 3 * blocks.len() != n || blocks.values_len() != pattern.row_idx().len() {
             return Err(SolveError::Analysis("the block structure is not the pattern's".into()));
         }
-        let blocks = blocks.clone();
+        // (the arrays of the previous topology's analysis are reused: a
+        // solver renewed by a cut writes into pages it already has)
         // the diagonal block's nine slots from its position among the block
         // rows (one search per block; the first block without one is named)
-        let slots: Vec<Option<[usize; 9]>> = (0..n / 3)
-            .into_par_iter()
-            .map(|j| {
-                let rows = &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-                let p = rows.binary_search(&(j as u32)).ok()?;
-                let stride = 3 * rows.len();
-                Some(std::array::from_fn(|k| blocks.start[j] + (k % 3) * stride + 3 * p + k / 3))
-            })
-            .collect();
-        if let Some(j) = slots.iter().position(Option::is_none) {
+        let slot = |j: usize| -> Option<[usize; 9]> {
+            let rows = blocks.column_rows(j);
+            let p = rows.binary_search(&(j as u32)).ok()?;
+            let stride = 3 * rows.len();
+            Some(std::array::from_fn(|k| blocks.start[j] + (k % 3) * stride + 3 * p + k / 3))
+        };
+        if let Some(j) = (0..n / 3).into_par_iter().find_first(|&j| slot(j).is_none()) {
             return Err(SolveError::Analysis(format!("block {j} has no diagonal")));
         }
-        self.diagonal_blocks = slots.into_iter().flatten().collect();
-        self.inverse_blocks = vec![[0.0; 9]; n / 3];
+        self.diagonal_blocks.clear();
+        self.diagonal_blocks.par_extend((0..n / 3).into_par_iter().map(|j| slot(j).expect("checked above")));
+        self.inverse_blocks.resize(n / 3, [0.0; 9]);
         // (the rotated rest-state factor replaces block Jacobi and its
-        // coarse level)
-        self.coarse = self.rest.is_none().then(|| CoarseSpace::new(&blocks, aggregate_limit(pattern.row_idx().len())));
-        self.blocks = blocks;
+        // coarse level, and takes the new reference before a solve)
+        let limit = aggregate_limit(pattern.row_idx().len());
+        let old = self.coarse.take().unwrap_or_default();
+        self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, old));
+        if let Some(rest) = self.rest.as_mut() {
+            rest.ready = false;
+        }
+        self.blocks.ptr.clone_from(&blocks.ptr);
+        self.blocks.rows.clone_from(&blocks.rows);
+        self.blocks.start.clone_from(&blocks.start);
+        // (every entry is written before it is read in a solve)
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
-            *v = vec![0.0; n];
+            v.resize(n, 0.0);
         }
         let chunks = (n / 3).div_ceil(CHUNK_BLOCKS);
-        (self.partial, self.partial_pairs) = (vec![0.0; chunks], vec![[0.0; 2]; chunks]);
+        self.partial.resize(chunks, 0.0);
+        self.partial_pairs.resize(chunks, [0.0; 2]);
         Ok(())
     }
 

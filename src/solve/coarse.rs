@@ -84,7 +84,17 @@ pub(super) struct CoarseSpace {
 impl CoarseSpace {
     /// Aggregates of the blocks of `blocks`, coarsened until at most
     /// `max_aggregates` remain (or a round merges nothing).
+    #[cfg(test)]
     pub fn new(blocks: &BlockStructure, max_aggregates: usize) -> Self {
+        Self::renew(blocks, max_aggregates, Self::default())
+    }
+
+    /// Aggregates of the blocks of `blocks`, coarsened until at most
+    /// `max_aggregates` remain (or a round merges nothing), in the arrays
+    /// of `old` (the space of the pattern before a topology change, or an
+    /// empty one): a space per cut reuses its predecessor's memory instead
+    /// of faulting in fresh pages for its runs.
+    pub fn renew(blocks: &BlockStructure, max_aggregates: usize, old: Self) -> Self {
         let n = blocks.ptr.len() - 1;
         let mut of: Vec<u32> = (0..n as u32).collect();
         let (mut count, mut graph) = (n, None::<(Vec<u32>, Vec<u32>)>);
@@ -110,7 +120,10 @@ impl CoarseSpace {
         }
         // (each task of columns writes its own stretch of the runs)
         let runs = *run_ptr.last().expect("starts with 0") as usize;
-        let (mut run_end, mut run_aggregate) = (vec![0u32; runs], vec![0u32; runs]);
+        let (mut run_end, mut run_aggregate, mut run_sums) = (old.run_end, old.run_aggregate, old.run_sums);
+        run_end.resize(runs, 0);
+        run_aggregate.resize(runs, 0);
+        run_sums.resize(runs, [0.0; 18]);
         let mut tasks = Vec::with_capacity(n.div_ceil(RUN_TASK_COLUMNS));
         let (mut ends, mut aggregates) = (&mut run_end[..], &mut run_aggregate[..]);
         for first in (0..n).step_by(RUN_TASK_COLUMNS) {
@@ -131,8 +144,20 @@ impl CoarseSpace {
                 }
             }
         });
-        let run_sums = vec![[0.0; 18]; run_end.len()];
-        CoarseSpace { of, ptr, members, run_ptr, run_end, run_aggregate, run_sums, ..Default::default() }
+        CoarseSpace {
+            of,
+            ptr,
+            members,
+            run_ptr,
+            run_end,
+            run_aggregate,
+            run_sums,
+            factor: old.factor,
+            partial: old.partial,
+            restricted: old.restricted,
+            correction: old.correction,
+            ..Default::default()
+        }
     }
 
     /// Number of aggregates.

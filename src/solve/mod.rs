@@ -145,17 +145,41 @@ pub const AUTO_CHOLESKY_MAX_UNKNOWNS: usize = 30_000;
 /// as long at 630 on a 6x5x4 box, growing from there.
 pub const ENVELOPE_MAX_UNKNOWNS: usize = 450;
 
+/// The solver [`make_solver`] makes: a [`SolverKind`] resolved for a
+/// number of unknowns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolverChoice {
+    /// [`EnvelopeCholesky`].
+    Envelope,
+    /// [`Cholesky`].
+    Sparse,
+    /// [`ConjugateGradient`] with block Jacobi and the coarse level.
+    Cg,
+    /// [`ConjugateGradient`] with the rotated rest-state factor.
+    CgRest,
+}
+
+impl SolverChoice {
+    /// The solver for `unknowns` scalar unknowns of `kind`.
+    pub fn of(kind: SolverKind, unknowns: usize) -> Self {
+        match kind {
+            SolverKind::Auto | SolverKind::Cholesky if unknowns <= ENVELOPE_MAX_UNKNOWNS => SolverChoice::Envelope,
+            SolverKind::Auto if unknowns <= AUTO_CHOLESKY_MAX_UNKNOWNS => SolverChoice::Sparse,
+            SolverKind::Cholesky | SolverKind::SparseCholesky => SolverChoice::Sparse,
+            SolverKind::Auto | SolverKind::Cg => SolverChoice::Cg,
+            SolverKind::CgRest => SolverChoice::CgRest,
+        }
+    }
+}
+
 /// A boxed solver of `kind` for `unknowns` scalar unknowns (`tolerance` and
 /// `max_iterations` apply to CG).
 pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterations: usize) -> Box<dyn LinearSolver> {
-    match kind {
-        SolverKind::Auto | SolverKind::Cholesky if unknowns <= ENVELOPE_MAX_UNKNOWNS => {
-            Box::new(EnvelopeCholesky::default())
-        }
-        SolverKind::Auto if unknowns <= AUTO_CHOLESKY_MAX_UNKNOWNS => Box::new(Cholesky::default()),
-        SolverKind::Cholesky | SolverKind::SparseCholesky => Box::new(Cholesky::default()),
-        SolverKind::Auto | SolverKind::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
-        SolverKind::CgRest => Box::new(ConjugateGradient::new(tolerance, max_iterations).with_rest_preconditioner()),
+    match SolverChoice::of(kind, unknowns) {
+        SolverChoice::Envelope => Box::new(EnvelopeCholesky::default()),
+        SolverChoice::Sparse => Box::new(Cholesky::default()),
+        SolverChoice::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
+        SolverChoice::CgRest => Box::new(ConjugateGradient::new(tolerance, max_iterations).with_rest_preconditioner()),
     }
 }
 
