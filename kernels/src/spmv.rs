@@ -9,8 +9,8 @@
 //! `y[3 j + c] = Σ_i Σ_r A[3 i + r][3 j + c] x[3 i + r]`: each scalar
 //! column, a contiguous run of values, dotted with the same gathered
 //! entries of `x`. The kernel gathers them once per block column (in
-//! segments of at most [`SEGMENT`] block rows), then takes the three dot
-//! products [`LANES`] values at a time, one running sum per lane, and adds
+//! segments of at most `SEGMENT` block rows), then takes the three dot
+//! products `LANES` values at a time, one running sum per lane, and adds
 //! the lanes in a fixed order at the end: the same arithmetic in the same
 //! order at every instruction set, so the same bits.
 
