@@ -83,6 +83,20 @@ pub(crate) fn in_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     rayon::join(f, || ()).0
 }
 
+/// `slice` cut into consecutive stretches of the given `lengths` (their sum
+/// at most its length), for parallel tasks that each write their own.
+pub(crate) fn stretches<T>(slice: &mut [T], lengths: impl IntoIterator<Item = usize>) -> Vec<&mut [T]> {
+    let mut rest = slice;
+    lengths
+        .into_iter()
+        .map(|len| {
+            let (head, tail) = std::mem::take(&mut rest).split_at_mut(len);
+            rest = tail;
+            head
+        })
+        .collect()
+}
+
 /// Any failure of cleave, by layer. Every variant names the place.
 #[derive(Debug, Error)]
 pub enum Error {
@@ -118,4 +132,18 @@ pub enum Error {
     /// An invariant of cleave itself does not hold: a bug, to be reported.
     #[error("internal error (please report): {0}")]
     Internal(String),
+}
+
+#[cfg(test)]
+mod tests {
+    /// Stretches follow one another, empty ones included, and leave the
+    /// rest of the slice out.
+    #[test]
+    fn stretches_cut_consecutive_parts() {
+        let mut values = [0; 7];
+        for (k, part) in super::stretches(&mut values, [2, 0, 3]).into_iter().enumerate() {
+            part.fill(k + 1);
+        }
+        assert_eq!(values, [1, 1, 3, 3, 3, 0, 0]);
+    }
 }

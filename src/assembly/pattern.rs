@@ -393,19 +393,17 @@ impl SparsePattern {
         fit(&mut incidences, at[1], previous[1], unset);
         fit(&mut slots, at[2], previous[2], 0);
         // the arrays cut into the stretches of runs of columns
-        let mut runs = Vec::with_capacity(num_blocks.div_ceil(LAY_OUT_RUN));
-        let (mut row_rest, mut inc_rest, mut slot_rest) = (&mut row_idx[..], &mut incidences[..], &mut slots[..]);
-        let mut block_rest = &mut block_rows[..];
-        for first in (0..num_blocks).step_by(LAY_OUT_RUN) {
-            let last = (first + LAY_OUT_RUN).min(num_blocks);
-            let len = |k: usize| starts[last][k] - starts[first][k];
-            let (r, rr) = std::mem::take(&mut row_rest).split_at_mut(len(0));
-            let (i, ir) = std::mem::take(&mut inc_rest).split_at_mut(len(1));
-            let (s, sr) = std::mem::take(&mut slot_rest).split_at_mut(len(2));
-            let (b, br) = std::mem::take(&mut block_rest).split_at_mut(len(3));
-            (row_rest, inc_rest, slot_rest, block_rest) = (rr, ir, sr, br);
-            runs.push((first..last, r, i, s, b));
-        }
+        let ranges: Vec<std::ops::Range<usize>> =
+            (0..num_blocks).step_by(LAY_OUT_RUN).map(|first| first..(first + LAY_OUT_RUN).min(num_blocks)).collect();
+        let lengths =
+            |k: usize| -> Vec<usize> { ranges.iter().map(|r| starts[r.end][k] - starts[r.start][k]).collect() };
+        let (row_parts, inc_parts) =
+            (crate::stretches(&mut row_idx, lengths(0)), crate::stretches(&mut incidences, lengths(1)));
+        let (slot_parts, block_parts) =
+            (crate::stretches(&mut slots, lengths(2)), crate::stretches(&mut block_rows, lengths(3)));
+        let runs: Vec<_> = (ranges.iter().cloned().zip(row_parts).zip(inc_parts).zip(slot_parts).zip(block_parts))
+            .map(|((((range, r), i), s), b)| (range, r, i, s, b))
+            .collect();
         runs.into_par_iter().for_each(|(range, row_out, inc_out, slot_out, block_out)| {
             let base = starts[range.start];
             for j in range {

@@ -124,16 +124,12 @@ impl CoarseSpace {
         run_end.resize(runs, 0);
         run_aggregate.resize(runs, 0);
         run_sums.resize(runs, [0.0; 18]);
-        let mut tasks = Vec::with_capacity(n.div_ceil(RUN_TASK_COLUMNS));
-        let (mut ends, mut aggregates) = (&mut run_end[..], &mut run_aggregate[..]);
-        for first in (0..n).step_by(RUN_TASK_COLUMNS) {
-            let last = (first + RUN_TASK_COLUMNS).min(n);
-            let len = (run_ptr[last] - run_ptr[first]) as usize;
-            let (e, rest_e) = std::mem::take(&mut ends).split_at_mut(len);
-            let (a, rest_a) = std::mem::take(&mut aggregates).split_at_mut(len);
-            (ends, aggregates) = (rest_e, rest_a);
-            tasks.push((first..last, e, a));
-        }
+        let tasks: Vec<std::ops::Range<usize>> =
+            (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
+        let lengths = || tasks.iter().map(|t| (run_ptr[t.end] - run_ptr[t.start]) as usize);
+        let ends = crate::stretches(&mut run_end, lengths());
+        let aggregates = crate::stretches(&mut run_aggregate, lengths());
+        let tasks: Vec<_> = tasks.iter().cloned().zip(ends).zip(aggregates).map(|((t, e), a)| (t, e, a)).collect();
         tasks.into_par_iter().for_each(|(columns, ends, aggregates)| {
             let mut k = 0;
             for j in columns {

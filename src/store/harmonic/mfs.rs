@@ -142,12 +142,8 @@ impl Workspace {
         if values.len() < total {
             values.resize(total, 0.0);
         }
-        let mut rest = &mut values[..];
-        lengths.map(|len| {
-            let (head, tail) = std::mem::take(&mut rest).split_at_mut(len);
-            rest = tail;
-            head
-        })
+        let mut parts = crate::stretches(values, lengths).into_iter();
+        std::array::from_fn(|_| parts.next().expect("one stretch per length"))
     }
 
     /// faer's scratch of at least `req`.
