@@ -59,10 +59,16 @@ pub(super) struct CoarseSpace {
     /// Blocks of aggregate `a` at `members[ptr[a]..ptr[a + 1]]`, ascending.
     ptr: Vec<u32>,
     members: Vec<u32>,
-    /// The runs of consecutive block rows of one aggregate in every block
-    /// column: column `j`'s at `run_ptr[j]..run_ptr[j + 1]`, run `k` ending
-    /// before row position `run_end[k]` and lying in aggregate
-    /// `run_aggregate[k]`.
+    /// Every block column's row positions ordered by aggregate (stably),
+    /// aligned with the block rows: each aggregate's rows of a column form
+    /// one run (on bunny_100k's 17.6k columns, 32k runs, where the rows in
+    /// node order made 80k; the coarse factor, a step's, took about 1 ms
+    /// less).
+    run_order: Vec<u32>,
+    /// The runs of block rows of one aggregate in every block column, in
+    /// `run_order`: column `j`'s at `run_ptr[j]..run_ptr[j + 1]`, run `k`
+    /// ending before position `run_end[k]` of the column's order and lying
+    /// in aggregate `run_aggregate[k]`.
     run_ptr: Vec<u32>,
     run_end: Vec<u32>,
     run_aggregate: Vec<u32>,
@@ -109,10 +115,20 @@ impl CoarseSpace {
             count = merged;
         }
         let (ptr, members) = group(&of, count);
+        let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+        let mut run_order = old.run_order;
+        run_order.resize(blocks.rows.len(), 0);
+        let column_lengths = (0..n).map(|j| (blocks.ptr[j + 1] - blocks.ptr[j]) as usize);
+        crate::stretches(&mut run_order, column_lengths).into_par_iter().enumerate().for_each(|(j, order)| {
+            let rows = column_rows(j);
+            order.iter_mut().enumerate().for_each(|(p, o)| *o = p as u32);
+            order.sort_by_key(|&p| of[rows[p as usize] as usize]);
+        });
+        let column_order = |j: usize| &run_order[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
         // runs are counted, then listed, column by column in parallel (and
         // in order)
-        let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-        let counts: Vec<u32> = (0..n).into_par_iter().map(|j| run_ends(column_rows(j), &of).count() as u32).collect();
+        let counts: Vec<u32> =
+            (0..n).into_par_iter().map(|j| run_ends(column_rows(j), column_order(j), &of).count() as u32).collect();
         let mut run_ptr = Vec::with_capacity(n + 1);
         run_ptr.push(0u32);
         for c in counts {
@@ -133,9 +149,9 @@ impl CoarseSpace {
         tasks.into_par_iter().for_each(|(columns, ends, aggregates)| {
             let mut k = 0;
             for j in columns {
-                let rows = column_rows(j);
-                for p in run_ends(rows, &of) {
-                    (ends[k], aggregates[k]) = (p as u32 + 1, of[rows[p] as usize]);
+                let (rows, order) = (column_rows(j), column_order(j));
+                for i in run_ends(rows, order, &of) {
+                    (ends[k], aggregates[k]) = (i as u32 + 1, of[rows[order[i] as usize] as usize]);
                     k += 1;
                 }
             }
@@ -144,6 +160,7 @@ impl CoarseSpace {
             of,
             ptr,
             members,
+            run_order,
             run_ptr,
             run_end,
             run_aggregate,
@@ -293,10 +310,12 @@ impl CoarseSpace {
             let stride = 3 * rows.len();
             let column = &values[blocks.start[j]..blocks.start[j] + 3 * stride];
             let runs = self.run_ptr[j] as usize..self.run_ptr[j + 1] as usize;
+            let order = &self.run_order[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
             let mut p = 0;
             for (k, &end) in runs.clone().zip(&self.run_end[runs]) {
                 let mut sum = [0.0; 18];
-                for q in p..end as usize {
+                for &q in &order[p..end as usize] {
+                    let q = q as usize;
                     let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3]);
                     (0..9).for_each(|e| sum[e] += block[e]);
                     if let Some(d) = self.offsets.get(rows[q] as usize) {
@@ -429,11 +448,12 @@ fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Ve
     (out_ptr, out_adj)
 }
 
-/// The positions `p` of `rows` where a run of rows of one aggregate (by
-/// `of`) ends: the last row, and every row whose successor lies in another
-/// aggregate.
-fn run_ends<'a>(rows: &'a [u32], of: &'a [u32]) -> impl Iterator<Item = usize> + 'a {
-    (0..rows.len()).filter(move |&p| p + 1 == rows.len() || of[rows[p + 1] as usize] != of[rows[p] as usize])
+/// The positions `i` of a column's `order` (its row positions, grouped by
+/// aggregate) where a run of rows of one aggregate (by `of`) ends: the
+/// last, and every one whose successor lies in another aggregate.
+fn run_ends<'a>(rows: &'a [u32], order: &'a [u32], of: &'a [u32]) -> impl Iterator<Item = usize> + 'a {
+    let aggregate = move |i: usize| of[rows[order[i] as usize] as usize];
+    (0..order.len()).filter(move |&i| i + 1 == order.len() || aggregate(i + 1) != aggregate(i))
 }
 
 /// The vertices of each group of `of` (`count` groups), ascending: group
