@@ -59,18 +59,12 @@ pub(super) struct CoarseSpace {
     /// Blocks of aggregate `a` at `members[ptr[a]..ptr[a + 1]]`, ascending.
     ptr: Vec<u32>,
     members: Vec<u32>,
-    /// Every block column's row positions ordered by aggregate (stably),
-    /// aligned with the block rows: each aggregate's rows of a column form
-    /// one run (on bunny_100k's 17.6k columns, 32k runs, where the rows in
-    /// node order made 80k; the coarse factor, a step's, took about 1 ms
-    /// less).
-    run_order: Vec<u32>,
-    /// The runs of block rows of one aggregate in every block column, in
-    /// `run_order`: column `j`'s at `run_ptr[j]..run_ptr[j + 1]`, run `k`
-    /// ending before position `run_end[k]` of the column's order and lying
-    /// in aggregate `run_aggregate[k]`.
+    /// The runs of every block column: its block rows of one aggregate
+    /// each, column `j`'s at `run_ptr[j]..run_ptr[j + 1]`, run `k` those in
+    /// aggregate `run_aggregate[k]`, in the order the rows first meet them
+    /// (on bunny_100k's 17.6k columns 32k runs; runs of consecutive rows
+    /// made 80k, and the coarse factor, a step's, took about 1 ms more).
     run_ptr: Vec<u32>,
-    run_end: Vec<u32>,
     run_aggregate: Vec<u32>,
     /// The sums of the blocks `A_ij` of every run, `Σ A_ij` and, with
     /// positions, `Σ S_iᵀ A_ij` (`[3 c + r]` and `[9 + 3 c + r]` for entry
@@ -116,19 +110,25 @@ impl CoarseSpace {
         }
         let (ptr, members) = group(&of, count);
         let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-        let mut run_order = old.run_order;
-        run_order.resize(blocks.rows.len(), 0);
-        let column_lengths = (0..n).map(|j| (blocks.ptr[j + 1] - blocks.ptr[j]) as usize);
-        crate::stretches(&mut run_order, column_lengths).into_par_iter().enumerate().for_each(|(j, order)| {
-            let rows = column_rows(j);
-            order.iter_mut().enumerate().for_each(|(p, o)| *o = p as u32);
-            order.sort_by_key(|&p| of[rows[p as usize] as usize]);
-        });
-        let column_order = |j: usize| &run_order[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+        // the aggregates of a column's rows, each once, as the rows meet them
+        let aggregates_of = |j: usize, seen: &mut Vec<u32>| {
+            seen.clear();
+            for &r in column_rows(j) {
+                let a = of[r as usize];
+                if !seen.contains(&a) {
+                    seen.push(a);
+                }
+            }
+        };
         // runs are counted, then listed, column by column in parallel (and
         // in order)
-        let counts: Vec<u32> =
-            (0..n).into_par_iter().map(|j| run_ends(column_rows(j), column_order(j), &of).count() as u32).collect();
+        let counts: Vec<u32> = (0..n)
+            .into_par_iter()
+            .map_init(Vec::new, |seen, j| {
+                aggregates_of(j, seen);
+                seen.len() as u32
+            })
+            .collect();
         let mut run_ptr = Vec::with_capacity(n + 1);
         run_ptr.push(0u32);
         for c in counts {
@@ -136,33 +136,26 @@ impl CoarseSpace {
         }
         // (each task of columns writes its own stretch of the runs)
         let runs = *run_ptr.last().expect("starts with 0") as usize;
-        let (mut run_end, mut run_aggregate, mut run_sums) = (old.run_end, old.run_aggregate, old.run_sums);
-        run_end.resize(runs, 0);
+        let (mut run_aggregate, mut run_sums) = (old.run_aggregate, old.run_sums);
         run_aggregate.resize(runs, 0);
         run_sums.resize(runs, [0.0; 18]);
         let tasks: Vec<std::ops::Range<usize>> =
             (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
-        let lengths = || tasks.iter().map(|t| (run_ptr[t.end] - run_ptr[t.start]) as usize);
-        let ends = crate::stretches(&mut run_end, lengths());
-        let aggregates = crate::stretches(&mut run_aggregate, lengths());
-        let tasks: Vec<_> = tasks.iter().cloned().zip(ends).zip(aggregates).map(|((t, e), a)| (t, e, a)).collect();
-        tasks.into_par_iter().for_each(|(columns, ends, aggregates)| {
-            let mut k = 0;
+        let lengths = tasks.iter().map(|t| (run_ptr[t.end] - run_ptr[t.start]) as usize);
+        let aggregates = crate::stretches(&mut run_aggregate, lengths);
+        tasks.into_par_iter().zip(aggregates).for_each(|(columns, aggregates)| {
+            let (mut seen, mut k) = (Vec::new(), 0);
             for j in columns {
-                let (rows, order) = (column_rows(j), column_order(j));
-                for i in run_ends(rows, order, &of) {
-                    (ends[k], aggregates[k]) = (i as u32 + 1, of[rows[order[i] as usize] as usize]);
-                    k += 1;
-                }
+                aggregates_of(j, &mut seen);
+                aggregates[k..k + seen.len()].copy_from_slice(&seen);
+                k += seen.len();
             }
         });
         CoarseSpace {
             of,
             ptr,
             members,
-            run_order,
             run_ptr,
-            run_end,
             run_aggregate,
             run_sums,
             factor: old.factor,
@@ -310,24 +303,22 @@ impl CoarseSpace {
             let stride = 3 * rows.len();
             let column = &values[blocks.start[j]..blocks.start[j] + 3 * stride];
             let runs = self.run_ptr[j] as usize..self.run_ptr[j + 1] as usize;
-            let order = &self.run_order[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-            let mut p = 0;
-            for (k, &end) in runs.clone().zip(&self.run_end[runs]) {
-                let mut sum = [0.0; 18];
-                for &q in &order[p..end as usize] {
-                    let q = q as usize;
-                    let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3]);
-                    (0..9).for_each(|e| sum[e] += block[e]);
-                    if let Some(d) = self.offsets.get(rows[q] as usize) {
-                        // S_iᵀ = [d_i]×: column c of S_iᵀ A_ij is d_i × (column c of A_ij)
-                        for c in 0..3 {
-                            let v = cross(*d, [block[3 * c], block[3 * c + 1], block[3 * c + 2]]);
-                            (0..3).for_each(|r| sum[9 + 3 * c + r] += v[r]);
-                        }
+            let aggregates = &self.run_aggregate[runs.clone()];
+            let sums = &mut out[runs.start - first_run..runs.end - first_run];
+            sums.fill([0.0; 18]);
+            for (q, &row) in rows.iter().enumerate() {
+                let a = self.of[row as usize];
+                let k = aggregates.iter().position(|&b| b == a).expect("every row's aggregate has its run");
+                let sum = &mut sums[k];
+                let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3]);
+                (0..9).for_each(|e| sum[e] += block[e]);
+                if let Some(d) = self.offsets.get(row as usize) {
+                    // S_iᵀ = [d_i]×: column c of S_iᵀ A_ij is d_i × (column c of A_ij)
+                    for c in 0..3 {
+                        let v = cross(*d, [block[3 * c], block[3 * c + 1], block[3 * c + 2]]);
+                        (0..3).for_each(|r| sum[9 + 3 * c + r] += v[r]);
                     }
                 }
-                out[k - first_run] = sum;
-                p = end as usize;
             }
         }
     }
@@ -446,14 +437,6 @@ fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Ve
         out_ptr.push(out_adj.len() as u32);
     }
     (out_ptr, out_adj)
-}
-
-/// The positions `i` of a column's `order` (its row positions, grouped by
-/// aggregate) where a run of rows of one aggregate (by `of`) ends: the
-/// last, and every one whose successor lies in another aggregate.
-fn run_ends<'a>(rows: &'a [u32], order: &'a [u32], of: &'a [u32]) -> impl Iterator<Item = usize> + 'a {
-    let aggregate = move |i: usize| of[rows[order[i] as usize] as usize];
-    (0..order.len()).filter(move |&i| i + 1 == order.len() || aggregate(i + 1) != aggregate(i))
 }
 
 /// The vertices of each group of `of` (`count` groups), ascending: group
