@@ -516,7 +516,12 @@ impl LinearSolver for ConjugateGradient {
             *inv = invert3(slots.map(|s| val[s]));
         });
         if let Some(coarse) = self.coarse.as_mut() {
-            coarse.factor(&self.blocks, val)?;
+            // (from the values the iteration reads: the preconditioner
+            // need not be exact, and they are half the bytes)
+            match self.rounded {
+                true => coarse.factor(&self.blocks, &self.values32)?,
+                false => coarse.factor(&self.blocks, val)?,
+            }
         }
         Ok(())
     }

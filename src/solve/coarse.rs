@@ -18,6 +18,7 @@
 //! a cut body. Every sum runs in a fixed order, so the correction has the
 //! same bits on any number of threads.
 
+use cleave_kernels::spmv::Value;
 use cleave_kernels::vec3::cross;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
@@ -204,7 +205,8 @@ impl CoarseSpace {
         }
     }
 
-    /// Assembles `A_c = Pᵀ A P` from the values on `blocks` and factors it.
+    /// Assembles `A_c = Pᵀ A P` from the values on `blocks` (`f64`, or the
+    /// `f32` copy the iteration reads) and factors it.
     /// The run sums stream through the values in their order; each coarse
     /// column block `b` then adds, for each member `j` and each run of
     /// aggregate `a` in its column, `[T  T S_j; U  U S_j]` to `A_c[a, b]`
@@ -213,7 +215,7 @@ impl CoarseSpace {
     /// stiffness: every rotation's diagonal gets `1e-12` of the largest
     /// diagonal entry, so the factor exists and such a mode, whose `P`
     /// column is zero, corrects nothing.
-    pub fn factor(&mut self, blocks: &BlockStructure, values: &[f64]) -> Result<(), SolveError> {
+    pub fn factor<T: Value>(&mut self, blocks: &BlockStructure, values: &[T]) -> Result<(), SolveError> {
         let (k, rotations) = (self.modes(), !self.offsets.is_empty());
         let m = k * self.aggregates();
         let mut sums = std::mem::take(&mut self.run_sums);
@@ -280,10 +282,10 @@ impl CoarseSpace {
     /// The run sums of the block columns `columns` into `out` (theirs
     /// alone), halving the range across threads down to
     /// [`RUN_TASK_COLUMNS`] columns.
-    fn sum_runs(
+    fn sum_runs<T: Value>(
         &self,
         blocks: &BlockStructure,
-        values: &[f64],
+        values: &[T],
         columns: std::ops::Range<usize>,
         out: &mut [[f64; 18]],
     ) {
@@ -310,7 +312,7 @@ impl CoarseSpace {
                 let a = self.of[row as usize];
                 let k = aggregates.iter().position(|&b| b == a).expect("every row's aggregate has its run");
                 let sum = &mut sums[k];
-                let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3]);
+                let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3].to_f64());
                 (0..9).for_each(|e| sum[e] += block[e]);
                 if let Some(d) = self.offsets.get(row as usize) {
                     // S_iᵀ = [d_i]×: column c of S_iᵀ A_ij is d_i × (column c of A_ij)
