@@ -201,13 +201,15 @@ impl TreeSolve {
     }
 
     /// Overwrites `x` with `(L Lᵀ)⁻¹ x`, `L` the factor with structure
-    /// `symbolic` (the one given to [`TreeSolve::new`]) and `values`.
+    /// `symbolic` (the one given to [`TreeSolve::new`]) and `values`. The
+    /// tasks' copies of their columns carry them from the forward solve to
+    /// the backward one (the top supernodes touch no task's columns).
     pub fn solve_in_place(&mut self, symbolic: &SymbolicSupernodalCholesky<usize>, values: &[f64], x: &mut [f64]) {
         self.forward(symbolic, values, x);
         self.backward(symbolic, values, x);
     }
 
-    /// `x ← L⁻¹ x`.
+    /// `x ← L⁻¹ x` (the task columns' part in the tasks' copies only).
     fn forward(&mut self, symbolic: &SymbolicSupernodalCholesky<usize>, values: &[f64], x: &mut [f64]) {
         let (place, local_start) = (&self.place, &self.local_start);
         let shared = &*x;
@@ -229,7 +231,6 @@ impl TreeSolve {
             }
         });
         for task in &self.tasks {
-            task.copy_to(symbolic, x);
             task.boundary.iter().zip(&task.values).for_each(|(&r, v)| x[r] -= v);
         }
         for &s in &self.top {
@@ -244,7 +245,8 @@ impl TreeSolve {
         }
     }
 
-    /// `x ← L⁻ᵀ x`.
+    /// `x ← L⁻ᵀ x`, after [`TreeSolve::forward`] (whose solved task columns
+    /// are in the tasks' copies).
     fn backward(&mut self, symbolic: &SymbolicSupernodalCholesky<usize>, values: &[f64], x: &mut [f64]) {
         for &s in self.top.iter().rev() {
             let node = supernode(symbolic, values, s);
@@ -257,7 +259,6 @@ impl TreeSolve {
         let (place, local_start) = (&self.place, &self.local_start);
         let shared = &*x;
         self.tasks.par_iter_mut().for_each(|task| {
-            task.copy_from(symbolic, shared);
             task.values.iter_mut().zip(&task.boundary).for_each(|(v, &r)| *v = shared[r]);
             for &s in task.supernodes.iter().rev() {
                 let node = supernode(symbolic, values, s);
