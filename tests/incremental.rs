@@ -129,6 +129,24 @@ fn a_cut_that_touches_nothing_changes_nothing() {
     system.check();
 }
 
+/// A cut rewrites the pattern's arrays in place: the columns it touched
+/// are written where they now start and the others move within the same
+/// arrays (no new ones, whose pages a cut across a large mesh would fault
+/// in), while the arrays' capacity holds what the cut adds.
+#[test]
+fn a_small_cut_updates_the_pattern_in_place() {
+    let mut system = System::new(box_tet([0.0; 3], [1.0; 3], [10, 10, 10]).unwrap());
+    let rows = |s: &System| (s.pattern.symbolic.row_idx().as_ptr(), s.pattern.symbolic.row_idx().len());
+    let (before, len) = rows(&system);
+    let plane = Plane { point: [0.52, 0.5, 0.5], normal: [1.0, 0.1, 0.2] };
+    let polygon = common::rectangle_in_plane(&plane, (0.15, 0.15), 0.1);
+    system.cut(|m| cut_by_polygon(m, &polygon, &SplitOptions::default()).unwrap().cut);
+    let (after, new_len) = rows(&system);
+    assert!(new_len > len, "the cut added no entries: it tests nothing");
+    assert_eq!(before, after, "the update laid the rows out in new memory");
+    system.check();
+}
+
 #[test]
 fn a_cut_along_a_layer_of_nodes_only_renames_and_still_matches() {
     // x = 0.5 runs through a layer of nodes: nothing is split, the elements

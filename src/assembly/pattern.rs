@@ -21,7 +21,8 @@ struct Incidence {
     local: u32,
     /// The element's node count `k`.
     size: u32,
-    /// Start of the element's `k` slots in [`SparsePattern::slots`].
+    /// Start of the element's `k` slots among the node's in
+    /// [`SparsePattern::slots`].
     slots: u32,
 }
 
@@ -33,36 +34,52 @@ struct Incidence {
 /// Columns are disjoint, so nodes run in parallel without locks and every
 /// entry receives its contributions in the same order whatever the thread
 /// count (bitwise reproducible).
+///
+/// Every array holds the nodes' columns one after another, in node order,
+/// with nothing between them: the step's passes over the values stream
+/// them (gaps left between the columns for cuts to grow into cost a
+/// bunny_100k step 7 %, 3.5 ms, in assembly and in the solve). A topology
+/// change rewrites the columns of the nodes it touched where they now
+/// start, and moves the others between them as a whole (see
+/// [`SparsePattern::update`]).
 #[derive(Clone, Debug)]
 pub struct SparsePattern {
     /// Number of blocks (3 scalar unknowns each).
     pub num_blocks: usize,
     /// The scalar compressed-column structure (`3 * num_blocks` square).
     pub symbolic: SymbolicSparseColMat<usize>,
-    /// The same structure in 3x3 blocks (what block solvers read).
+    /// The same structure in 3x3 blocks (what block solvers read): the
+    /// block rows of block column `j` from `col_ptr[3 j] / 9` on.
     blocks: BlockStructure,
-    /// Scalar offset between consecutive columns of block column `j`.
+    /// Scalar offset between consecutive columns of block column `j` (three
+    /// times its number of block rows).
     col_stride: Vec<usize>,
-    /// CSR offsets into `incidences`, one row per node.
+    /// CSR offsets into `incidences` and into `slots`, one row per node.
     offsets: Vec<u32>,
+    slot_offsets: Vec<u32>,
     /// Elements touching each node, in a fixed order.
     incidences: Vec<Incidence>,
     /// For each incidence and each local row node `a` of its element: the
     /// offset of scalar entry `(3 node_a, 3 j)` from the start of column
-    /// `3 j` (so a column that does not change keeps its slots).
+    /// `3 j` (so a column that moves keeps its slots).
     slots: Vec<u32>,
     /// Offset of the diagonal block's first entry from the start of column
     /// `3 j`, per node.
     diagonal: Vec<u32>,
-    /// The previous topology's arrays, emptied: the next update writes into
-    /// them instead of fresh memory (a cut costs no page faults for the
-    /// large arrays, at the price of keeping them twice).
-    spare: Buffers,
+}
+
+/// `array` at length `len`, new items `fill`: when it outgrows its
+/// capacity it takes an eighth to spare, so that the columns the next cuts
+/// append neither copy it nor fault in its pages again.
+fn grow<T: Clone>(array: &mut Vec<T>, len: usize, fill: T) {
+    if len > array.capacity() {
+        array.reserve_exact(len + len / 8 - array.len());
+    }
+    array.resize(len, fill);
 }
 
 /// A pattern as a checkpoint stores it: the arrays, the compressed
-/// columns as plain vectors (faer's structure has no serde support), and
-/// no spare buffers (they hold capacity, not data).
+/// columns as plain vectors (faer's structure has no serde support).
 #[derive(serde::Serialize, serde::Deserialize)]
 struct Stored<Columns, Incidences, Numbers> {
     num_blocks: usize,
@@ -70,6 +87,7 @@ struct Stored<Columns, Incidences, Numbers> {
     row_idx: Columns,
     col_stride: Columns,
     offsets: Numbers,
+    slot_offsets: Numbers,
     incidences: Incidences,
     slots: Numbers,
     diagonal: Numbers,
@@ -83,6 +101,7 @@ impl serde::Serialize for SparsePattern {
             row_idx: self.symbolic.row_idx(),
             col_stride: &self.col_stride[..],
             offsets: &self.offsets[..],
+            slot_offsets: &self.slot_offsets[..],
             incidences: &self.incidences[..],
             slots: &self.slots[..],
             diagonal: &self.diagonal[..],
@@ -92,57 +111,69 @@ impl serde::Serialize for SparsePattern {
 }
 
 impl<'de> serde::Deserialize<'de> for SparsePattern {
-    /// Checks the compressed columns (sorted rows in range, monotone
-    /// offsets) and the per-node arrays' lengths before building faer's
-    /// structure, which would panic on them.
+    /// Checks the compressed columns (sorted rows in range, one block
+    /// column's three scalar columns alike) and every node's incidences and
+    /// slots (within its column) before building faer's structure, which
+    /// would panic on bad columns, and before assembly writes through the
+    /// slots.
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         let s: Stored<Vec<usize>, Vec<Incidence>, Vec<u32>> = serde::Deserialize::deserialize(deserializer)?;
-        let n = 3 * s.num_blocks;
-        let columns_ok = s.col_ptr.len() == n + 1
+        let (nb, n) = (s.num_blocks, 3 * s.num_blocks);
+        let lengths_ok = s.col_ptr.len() == n + 1
             && s.col_ptr.first() == Some(&0)
             && s.col_ptr.last() == Some(&s.row_idx.len())
-            && s.col_ptr.windows(2).all(|w| w[0] <= w[1])
-            && s.col_ptr.windows(2).all(|w| {
-                let rows = &s.row_idx[w[0]..w[1]];
-                rows.iter().all(|&r| r < n) && rows.windows(2).all(|p| p[0] < p[1])
-            });
-        let nodes_ok = s.col_stride.len() == s.num_blocks
-            && s.diagonal.len() == s.num_blocks
-            && s.offsets.len() == s.num_blocks + 1
-            && s.offsets.last().map(|&o| o as usize) == Some(s.incidences.len());
-        if !(columns_ok && nodes_ok) {
+            && s.col_stride.len() == nb
+            && s.diagonal.len() == nb
+            && [&s.offsets, &s.slot_offsets].iter().all(|o| o.len() == nb + 1 && o.first() == Some(&0))
+            && s.offsets.last().map(|&o| o as usize) == Some(s.incidences.len())
+            && s.slot_offsets.last().map(|&o| o as usize) == Some(s.slots.len());
+        let column_ok = |j: usize| {
+            let (start, stride) = (s.col_ptr[3 * j], s.col_stride[j]);
+            let shape_ok = stride % 3 == 0
+                && (0..=3).all(|c| s.col_ptr[3 * j + c] == start + c * stride)
+                && s.offsets[j] <= s.offsets[j + 1]
+                && s.slot_offsets[j] <= s.slot_offsets[j + 1];
+            if !shape_ok {
+                return false;
+            }
+            let rows = &s.row_idx[start..start + 3 * stride];
+            let first = &rows[..stride];
+            let rows_ok = first.windows(2).all(|p| p[0] < p[1])
+                && first.last().is_none_or(|&r| r < n)
+                && first.chunks(3).all(|r| r[0] % 3 == 0 && r[1] == r[0] + 1 && r[2] == r[0] + 2)
+                && (1..3).all(|c| rows[c * stride..(c + 1) * stride] == *first)
+                && first.get(s.diagonal[j] as usize) == Some(&(3 * j));
+            let slots = &s.slots[s.slot_offsets[j] as usize..s.slot_offsets[j + 1] as usize];
+            let incidences = &s.incidences[s.offsets[j] as usize..s.offsets[j + 1] as usize];
+            rows_ok
+                && slots.iter().all(|&slot| slot % 3 == 0 && (slot as usize) < stride)
+                && incidences.iter().all(|inc| {
+                    (inc.size as usize) <= MAX_ENTRY_BLOCKS && (inc.slots + inc.size) as usize <= slots.len()
+                })
+        };
+        if !(lengths_ok && (0..nb).all(column_ok)) {
             return Err(serde::de::Error::custom("the sparse pattern's arrays are inconsistent"));
         }
         let symbolic = SymbolicSparseColMat::new_checked(n, n, s.col_ptr, None, s.row_idx);
         let blocks = BlockStructure::new(symbolic.as_ref()).map_err(serde::de::Error::custom)?;
         Ok(SparsePattern {
-            num_blocks: s.num_blocks,
+            num_blocks: nb,
             symbolic,
             blocks,
             col_stride: s.col_stride,
             offsets: s.offsets,
+            slot_offsets: s.slot_offsets,
             incidences: s.incidences,
             slots: s.slots,
             diagonal: s.diagonal,
-            spare: Buffers::default(),
         })
     }
-}
-
-/// The large arrays of a pattern, reused between updates.
-#[derive(Clone, Debug, Default)]
-struct Buffers {
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
-    block_rows: Vec<u32>,
-    incidences: Vec<Incidence>,
-    slots: Vec<u32>,
 }
 
 /// The `n x n` compressed columns `col_ptr`, `row_idx`, checked as faer's
 /// `new_checked` checks them (offsets ascending from 0 to the number of
 /// rows, each column's rows strictly ascending below `n`) but with the
-/// columns in parallel: a cut's new pattern holds millions of rows.
+/// columns in parallel: a new pattern holds millions of rows.
 fn checked_columns(n: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>) -> SymbolicSparseColMat<usize> {
     let offsets_ok = col_ptr.len() == n + 1
         && col_ptr.first() == Some(&0)
@@ -158,27 +189,6 @@ fn checked_columns(n: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>) -> Symbol
     // just above
     unsafe { SymbolicSparseColMat::new_unchecked(n, n, col_ptr, None, row_idx) }
 }
-
-/// Sets the length of a reused `array` to `len` for
-/// [`SparsePattern::lay_out`], which overwrites every value: its old
-/// contents stay, so only what it grows by is written here. An array too
-/// small is emptied first (growing then copies nothing) and given room for
-/// four more changes like this one, from `previous` values to `len` (the
-/// spare arrays are two topologies old when reused; a blade cut across
-/// bunny_100k adds about 5 % to its entries), and at least a quarter: a
-/// new array's pages are faulted in as they are first written, which cost
-/// a blade cut on bunny_100k about 2,600 page faults when the arrays had a
-/// sixteenth to spare.
-fn fit<T: Copy>(array: &mut Vec<T>, len: usize, previous: usize, fill: T) {
-    if array.capacity() < len {
-        array.clear();
-        array.reserve(len + (4 * len.saturating_sub(previous)).max(len / 4));
-    }
-    array.resize(len, fill);
-}
-
-/// Columns per parallel task of [`SparsePattern::lay_out`].
-const LAY_OUT_RUN: usize = 256;
 
 /// A raw pointer to the values, shared by the node tasks of one assembly.
 #[derive(Clone, Copy)]
@@ -204,13 +214,138 @@ impl SharedValues {
 /// assembly phase of a step: 53 ms without the hint, 16-20 ms with it).
 const PREFETCH_AHEAD: usize = 4;
 
-/// The incidences of one node being laid out.
-enum Column<'a> {
-    /// The same elements as in this pattern (rows and slots are copied;
-    /// only where the elements sit in the store is refreshed).
-    Kept(&'a SparsePattern),
-    /// Recomputed from these incidences.
-    New(Vec<Incidence>),
+/// An incidence not yet written.
+const UNSET: Incidence = Incidence { batch: 0, element: 0, id: 0, local: 0, size: 0, slots: 0 };
+
+/// Columns per parallel task of [`SparsePattern::lay_out`].
+const LAY_OUT_RUN: usize = 256;
+
+/// A node's column computed from its elements.
+struct NewColumn {
+    /// The elements touching the node, in the pattern's order.
+    incidences: Vec<Incidence>,
+    /// Its block rows: the union of their nodes and itself, ascending.
+    rows: Vec<u32>,
+}
+
+impl NewColumn {
+    /// The column of node `j` touched by `incidences`.
+    fn of(j: usize, incidences: Vec<Incidence>, store: &impl Couplings) -> Self {
+        let mut rows: Vec<u32> = incidences
+            .iter()
+            .flat_map(|inc| store.blocks(inc.batch as usize, inc.element as usize).iter().copied())
+            .collect();
+        rows.push(j as u32); // lone nodes keep their diagonal
+        rows.sort_unstable();
+        rows.dedup();
+        NewColumn { incidences, rows }
+    }
+
+    /// Number of slots its incidences take.
+    fn slots(&self) -> usize {
+        self.incidences.iter().map(|inc| inc.size as usize).sum()
+    }
+
+    /// Writes the column into its stretches of the arrays: the scalar rows (`9 len` of
+    /// `row_out`, the block rows three times over), the block rows, the
+    /// incidences (their slots counted from the node's first) and the
+    /// slots; returns the diagonal block's offset.
+    fn write(
+        &self,
+        j: usize,
+        store: &impl Couplings,
+        row_out: &mut [usize],
+        block_out: &mut [u32],
+        inc_out: &mut [Incidence],
+        slot_out: &mut [u32],
+    ) -> u32 {
+        let r = &self.rows;
+        block_out[..r.len()].copy_from_slice(r);
+        let third = 3 * r.len();
+        for (out, &i) in row_out[..third].chunks_exact_mut(3).zip(r) {
+            out.copy_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
+        }
+        row_out.copy_within(..third, third);
+        row_out.copy_within(..third, 2 * third);
+        let position = |i: u32| -> u32 {
+            let p = r.binary_search(&i).expect("pattern holds every element pair");
+            u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
+        };
+        let mut written = 0;
+        for (out, inc) in inc_out.iter_mut().zip(&self.incidences) {
+            *out = Incidence { slots: written as u32, ..*inc };
+            let nodes = store.blocks(inc.batch as usize, inc.element as usize);
+            for (s, &a) in slot_out[written..written + nodes.len()].iter_mut().zip(nodes) {
+                *s = position(a);
+            }
+            written += nodes.len();
+        }
+        position(j as u32)
+    }
+}
+
+/// Where every column starts after a change, given where each started
+/// (`old`, the end of the last column after them) and the length of each
+/// recomputed one (`fresh(j)`, for every column past the old ones too):
+/// the columns lie one after another, in order.
+fn new_starts(old: &[usize], fresh: impl Fn(usize) -> Option<usize>, n: usize) -> Vec<usize> {
+    let mut starts = Vec::with_capacity(n + 1);
+    let mut end = 0;
+    for j in 0..n {
+        starts.push(end);
+        end += fresh(j).unwrap_or_else(|| old[j + 1] - old[j]);
+    }
+    starts.push(end);
+    starts
+}
+
+/// Moves the columns that were not recomputed (those with `fresh[j]`
+/// false) from their `old` starts to their `new` ones. Columns between two
+/// recomputed ones move together, by one `copy_within`; the stretches
+/// moving up go first, the last first, then those moving down, the first
+/// first: the columns keep their order, so none is overwritten before it
+/// moves (a recomputed column's old items are not needed).
+fn move_columns<T: Copy>(array: &mut [T], fresh: &[bool], old: &[usize], new: &[usize]) {
+    let kept = old.len() - 1;
+    let mut stretches: Vec<(usize, usize)> = Vec::new();
+    let mut j = 0;
+    while j < kept {
+        if fresh[j] {
+            j += 1;
+            continue;
+        }
+        let first = j;
+        while j < kept && !fresh[j] {
+            j += 1;
+        }
+        stretches.push((first, j));
+    }
+    for &(a, b) in stretches.iter().rev().filter(|&&(a, _)| new[a] > old[a]) {
+        array.copy_within(old[a]..old[b], new[a]);
+    }
+    for &(a, b) in stretches.iter().filter(|&&(a, _)| new[a] < old[a]) {
+        array.copy_within(old[a]..old[b], new[a]);
+    }
+}
+
+/// `array`'s columns moved from their `old` starts to their `new` ones
+/// ([`move_columns`], the recomputed ones left to be written), its length
+/// set to the new end (new items `fill`).
+fn relocate<T: Copy>(array: &mut Vec<T>, recomputed: &[bool], old: &[usize], new: &[usize], fill: T) {
+    let end = new[new.len() - 1];
+    grow(array, end.max(array.len()), fill);
+    move_columns(array, recomputed, old, new);
+    array.truncate(end);
+}
+
+/// The block structure of the compressed columns `symbolic`, whose block
+/// column `j` has its block rows at `rows[col_ptr[3 j] / 9..]`.
+fn block_structure(symbolic: &SymbolicSparseColMat<usize>, rows: Vec<u32>) -> BlockStructure {
+    let cp = symbolic.col_ptr();
+    let blocks = symbolic.ncols() / 3;
+    let ptr = (0..=blocks).map(|j| u32::try_from(cp[3 * j] / 9).expect("fewer than 2^32 blocks")).collect();
+    let start = (0..blocks).map(|j| cp[3 * j]).collect();
+    BlockStructure::from_columns(ptr, rows, start, cp[3 * blocks]).expect("the layout writes ordered block columns")
 }
 
 impl SparsePattern {
@@ -232,14 +367,8 @@ impl SparsePattern {
                 }
             }
         }
-        let incidences: usize = columns.iter().map(Vec::len).sum();
-        let slots = columns.iter().flatten().map(|inc| inc.size as usize).sum();
-        let buffers = Buffers {
-            incidences: Vec::with_capacity(incidences),
-            slots: Vec::with_capacity(slots),
-            ..Default::default()
-        };
-        Self::lay_out(store, columns.into_iter().map(Column::New).collect(), buffers, None)
+        let columns = columns.into_par_iter().enumerate().map(|(j, inc)| NewColumn::of(j, inc, store));
+        Self::lay_out(store, columns.collect())
     }
 
     /// The pattern of no blocks.
@@ -250,10 +379,10 @@ impl SparsePattern {
             blocks: BlockStructure::default(),
             col_stride: Vec::new(),
             offsets: vec![0],
+            slot_offsets: vec![0],
             incidences: Vec::new(),
             slots: Vec::new(),
             diagonal: Vec::new(),
-            spare: Buffers::default(),
         }
     }
 
@@ -261,11 +390,22 @@ impl SparsePattern {
     /// were rebuilt in `store` (for an element store, see
     /// [`crate::store::ElementStore::update`]); `old_nodes` are the blocks
     /// those entries coupled before. Only the columns of their blocks, old
-    /// and new, are recomputed; the others are copied.
+    /// and new, are recomputed, and written where they now start; the
+    /// others move as a whole, in place (`move_columns`), instead of
+    /// being copied into new arrays: a blade cut across bunny_100k (3,000
+    /// nodes touched) took 14-15 ms in this phase with copies, 8 ms in
+    /// place, and faults in no new pages until the arrays outgrow their
+    /// capacity (`grow`).
     pub fn update(&mut self, num_blocks: usize, store: &impl Couplings, changed: &[u32], old_nodes: &[u32]) {
-        let spare = std::mem::take(&mut self.spare);
+        let kept = self.num_blocks;
+        if num_blocks < kept {
+            // (blocks removed: no cut does this)
+            *self = Self::build(num_blocks, store);
+            return;
+        }
         let mut dirty = vec![false; num_blocks];
         old_nodes.iter().for_each(|&v| dirty[v as usize] = true);
+        dirty[kept..].fill(true);
         let mut added: Vec<(u32, Incidence)> = Vec::new();
         for &e in changed {
             let (bi, i) = store.locate(e);
@@ -282,31 +422,98 @@ impl SparsePattern {
         let mut is_changed = vec![false; last];
         changed.iter().for_each(|&e| is_changed[e as usize] = true);
         let was_changed = |e: u32| is_changed.get(e as usize).copied().unwrap_or(false);
+        let dirty_list: Vec<usize> = (0..num_blocks).filter(|&j| dirty[j]).collect();
+        // where the changed entries sat: the store moved others into these
+        // places (a swap-remove), whose incidences are refreshed below
+        let mut vacated: Vec<(u32, u32)> = dirty_list
+            .iter()
+            .flat_map(|&j| self.column_incidences(j))
+            .filter(|inc| was_changed(inc.id))
+            .map(|inc| (inc.batch, inc.element))
+            .collect();
+        vacated.sort_unstable();
+        vacated.dedup();
         // (the columns are independent: made in parallel, in order)
         let this = &*self;
-        let columns: Vec<Column> = (0..num_blocks)
-            .into_par_iter()
-            .map(|j| {
-                if !dirty[j] && j < this.num_blocks {
-                    return Column::Kept(this);
-                }
+        let new: Vec<NewColumn> = dirty_list
+            .par_iter()
+            .map(|&j| {
                 let (lo, hi) =
                     (added.partition_point(|a| (a.0 as usize) < j), added.partition_point(|a| a.0 as usize <= j));
-                let kept = this.column_incidences(j).iter().filter(|inc| !was_changed(inc.id)).copied();
-                let mut incidences: Vec<Incidence> = kept.chain(added[lo..hi].iter().map(|a| a.1)).collect();
+                let staying = this.column_incidences(j).iter().filter(|inc| !was_changed(inc.id)).copied();
+                let mut incidences: Vec<Incidence> = staying.chain(added[lo..hi].iter().map(|a| a.1)).collect();
                 // entries of other elements may have moved in their batch
                 for inc in &mut incidences {
                     (inc.batch, inc.element) = store.locate(inc.id);
                 }
-                Column::New(incidences)
+                NewColumn::of(j, incidences, store)
             })
             .collect();
-        let previous = [self.nnz(), self.incidences.len(), self.slots.len(), self.blocks.rows_len()];
-        let new = Self::lay_out(store, columns, spare, Some(previous));
-        let old = std::mem::replace(self, new);
-        let (_, _, col_ptr, _, row_idx) = old.symbolic.into_parts();
-        let block_rows = old.blocks.into_rows();
-        self.spare = Buffers { col_ptr, row_idx, block_rows, incidences: old.incidences, slots: old.slots };
+        let mut which = vec![u32::MAX; num_blocks];
+        dirty_list.iter().enumerate().for_each(|(k, &j)| which[j] = k as u32);
+        let fresh = |j: usize| new.get(which[j] as usize);
+        // where the columns start now: block rows (values in nines),
+        // incidences, slots
+        let cp = self.symbolic.col_ptr();
+        let old_rows: Vec<usize> = (0..=kept).map(|j| cp[3 * j] / 9).collect();
+        let old_incidences: Vec<usize> = self.offsets.iter().map(|&o| o as usize).collect();
+        let old_slots: Vec<usize> = self.slot_offsets.iter().map(|&o| o as usize).collect();
+        let rows = new_starts(&old_rows, |j| fresh(j).map(|c| c.rows.len()), num_blocks);
+        let incidences = new_starts(&old_incidences, |j| fresh(j).map(|c| c.incidences.len()), num_blocks);
+        let slots = new_starts(&old_slots, |j| fresh(j).map(NewColumn::slots), num_blocks);
+        let nines = |r: &[usize]| r.iter().map(|&b| 9 * b).collect::<Vec<usize>>();
+        let (old_values, values) = (nines(&old_rows), nines(&rows));
+        // the columns that stay the same move, then the new ones are written
+        let (_, _, _, _, mut row_idx) = std::mem::replace(&mut self.symbolic, Self::empty().symbolic).into_parts();
+        let mut block_rows = std::mem::take(&mut self.blocks).into_rows();
+        relocate(&mut row_idx, &dirty, &old_values, &values, 0);
+        relocate(&mut block_rows, &dirty, &old_rows, &rows, 0);
+        relocate(&mut self.incidences, &dirty, &old_incidences, &incidences, UNSET);
+        relocate(&mut self.slots, &dirty, &old_slots, &slots, 0);
+        grow(&mut self.col_stride, num_blocks, 0);
+        grow(&mut self.diagonal, num_blocks, 0);
+        for (column, &j) in new.iter().zip(&dirty_list) {
+            let (v, b, i, s) = (values[j], rows[j], incidences[j], slots[j]);
+            let len = column.rows.len();
+            self.diagonal[j] = column.write(
+                j,
+                store,
+                &mut row_idx[v..v + 9 * len],
+                &mut block_rows[b..b + len],
+                &mut self.incidences[i..i + column.incidences.len()],
+                &mut self.slots[s..s + column.slots()],
+            );
+            self.col_stride[j] = 3 * len;
+        }
+        let n = 3 * num_blocks;
+        let col_ptr: Vec<usize> =
+            (0..n).map(|c| values[c / 3] + (c % 3) * self.col_stride[c / 3]).chain([values[num_blocks]]).collect();
+        let to_u32 =
+            |v: &[usize]| v.iter().map(|&o| u32::try_from(o).expect("fewer than 2^32 incidences and slots")).collect();
+        (self.offsets, self.slot_offsets) = (to_u32(&incidences), to_u32(&slots));
+        // the elements the store moved into the vacated places
+        for &(b, i) in &vacated {
+            if (i as usize) >= store.entries(b as usize) {
+                continue;
+            }
+            let id = store.id(b as usize, i as usize);
+            if was_changed(id) {
+                continue;
+            }
+            for &v in store.blocks(b as usize, i as usize) {
+                let column = self.offsets[v as usize] as usize..self.offsets[v as usize + 1] as usize;
+                for inc in self.incidences[column].iter_mut().filter(|inc| inc.id == id) {
+                    (inc.batch, inc.element) = (b, i);
+                }
+            }
+        }
+        self.num_blocks = num_blocks;
+        // SAFETY: the columns follow one another from 0 to the end of the
+        // rows; the kept ones were checked when laid out and only moved, the
+        // new ones hold their sorted, distinct rows below `n`
+        // (`NewColumn::of`)
+        self.symbolic = unsafe { SymbolicSparseColMat::new_unchecked(n, n, col_ptr, None, row_idx) };
+        self.blocks = block_structure(&self.symbolic, block_rows);
     }
 
     /// The ids of the entries (elements) coupling block `j`, in the
@@ -323,150 +530,77 @@ impl SparsePattern {
         }
     }
 
-    /// Lays out the compressed columns of `columns` into `buffers`, copying
-    /// the rows and slots of kept columns: the sizes first, then every
+    /// Lays out `columns` one after another: the sizes first, then every
     /// column written into its own stretch of the arrays, in parallel over
     /// runs of [`LAY_OUT_RUN`] columns (the arrays are the same whatever
-    /// the thread count). `previous` are the sizes of the pattern this one
-    /// replaces (entries, incidences, slots, block rows), if any.
-    fn lay_out(store: &impl Couplings, columns: Vec<Column>, buffers: Buffers, previous: Option<[usize; 4]>) -> Self {
+    /// the thread count).
+    fn lay_out(store: &impl Couplings, columns: Vec<NewColumn>) -> Self {
         let num_blocks = columns.len();
-        // block rows of every recomputed column: union of its elements' nodes
-        let rows: Vec<Vec<u32>> = columns
-            .par_iter()
-            .enumerate()
-            .map(|(j, col)| {
-                let Column::New(incidences) = col else {
-                    return Vec::new();
-                };
-                let mut r: Vec<u32> = incidences
-                    .iter()
-                    .flat_map(|inc| store.blocks(inc.batch as usize, inc.element as usize).iter().copied())
-                    .collect();
-                r.push(j as u32); // lone nodes keep their diagonal
-                r.sort_unstable();
-                r.dedup();
-                r
-            })
-            .collect();
-        // per column: scalar stride, incidences and slots, and where each
-        // starts in its array
-        let (mut col_stride, mut diagonal) = (Vec::with_capacity(num_blocks), Vec::with_capacity(num_blocks));
-        let mut starts = Vec::with_capacity(num_blocks + 1);
-        // (entries, incidences, slots, block rows)
-        let mut at = [0usize; 4];
-        for (j, col) in columns.iter().enumerate() {
+        // per column: block rows, incidences, slots
+        let sizes = |c: &NewColumn| [c.rows.len(), c.incidences.len(), c.slots()];
+        let mut starts: Vec<[usize; 3]> = Vec::with_capacity(num_blocks + 1);
+        let mut at = [0usize; 3];
+        for column in &columns {
             starts.push(at);
-            let (stride, incidences, slots) = match col {
-                Column::Kept(old) => {
-                    diagonal.push(old.diagonal[j]);
-                    // (a column's slots lie together, in incidence order)
-                    let incidences = old.column_incidences(j);
-                    let slots = incidences.last().map_or(0, |l| (l.slots + l.size - incidences[0].slots) as usize);
-                    (old.col_stride[j], incidences.len(), slots)
-                }
-                Column::New(incidences) => {
-                    let p = rows[j].binary_search(&(j as u32)).expect("every column holds its diagonal");
-                    diagonal.push(u32::try_from(3 * p).expect("fewer than 2^32 entries per column"));
-                    let slots = incidences.iter().map(|inc| inc.size as usize).sum();
-                    (3 * rows[j].len(), incidences.len(), slots)
-                }
-            };
-            col_stride.push(stride);
-            at[0] += 3 * stride;
-            at[1] += incidences;
-            at[2] += slots;
-            at[3] += stride / 3;
+            let size = sizes(column);
+            (0..3).for_each(|k| at[k] += size[k]);
         }
         starts.push(at);
-        let n = 3 * num_blocks;
-        let Buffers { mut col_ptr, mut row_idx, mut block_rows, mut incidences, mut slots } = buffers;
-        col_ptr.clear();
-        col_ptr.extend((0..n).map(|c| starts[c / 3][0] + (c % 3) * col_stride[c / 3]));
-        col_ptr.push(at[0]);
-        let offsets: Vec<u32> =
-            starts.iter().map(|s| u32::try_from(s[1]).expect("fewer than 2^32 incidences")).collect();
-        let unset = Incidence { batch: 0, element: 0, id: 0, local: 0, size: 0, slots: 0 };
-        let previous = previous.unwrap_or(at);
-        fit(&mut row_idx, at[0], previous[0], 0);
-        fit(&mut block_rows, at[3], previous[3], 0);
-        fit(&mut incidences, at[1], previous[1], unset);
-        fit(&mut slots, at[2], previous[2], 0);
+        let (mut row_idx, mut block_rows) = (Vec::new(), Vec::new());
+        let (mut incidences, mut slots) = (Vec::new(), Vec::new());
+        grow(&mut row_idx, 9 * at[0], 0);
+        grow(&mut block_rows, at[0], 0);
+        grow(&mut incidences, at[1], UNSET);
+        grow(&mut slots, at[2], 0);
         // the arrays cut into the stretches of runs of columns
         let ranges: Vec<std::ops::Range<usize>> =
             (0..num_blocks).step_by(LAY_OUT_RUN).map(|first| first..(first + LAY_OUT_RUN).min(num_blocks)).collect();
-        let lengths =
-            |k: usize| -> Vec<usize> { ranges.iter().map(|r| starts[r.end][k] - starts[r.start][k]).collect() };
-        let (row_parts, inc_parts) =
-            (crate::stretches(&mut row_idx, lengths(0)), crate::stretches(&mut incidences, lengths(1)));
-        let (slot_parts, block_parts) =
-            (crate::stretches(&mut slots, lengths(2)), crate::stretches(&mut block_rows, lengths(3)));
-        let runs: Vec<_> = (ranges.iter().cloned().zip(row_parts).zip(inc_parts).zip(slot_parts).zip(block_parts))
-            .map(|((((range, r), i), s), b)| (range, r, i, s, b))
+        let lengths = |k: usize, unit: usize| -> Vec<usize> {
+            ranges.iter().map(|r| unit * (starts[r.end][k] - starts[r.start][k])).collect()
+        };
+        let (row_parts, block_parts) =
+            (crate::stretches(&mut row_idx, lengths(0, 9)), crate::stretches(&mut block_rows, lengths(0, 1)));
+        let (inc_parts, slot_parts) =
+            (crate::stretches(&mut incidences, lengths(1, 1)), crate::stretches(&mut slots, lengths(2, 1)));
+        let runs: Vec<_> = (ranges.iter().cloned().zip(row_parts).zip(block_parts).zip(inc_parts).zip(slot_parts))
+            .map(|((((range, r), b), i), s)| (range, r, b, i, s))
             .collect();
-        runs.into_par_iter().for_each(|(range, row_out, inc_out, slot_out, block_out)| {
-            let base = starts[range.start];
-            for j in range {
-                let [e0, i0, s0, b0] = std::array::from_fn(|k| starts[j][k] - base[k]);
-                let [e1, i1, s1, b1] = std::array::from_fn(|k| starts[j + 1][k] - base[k]);
-                let (row_out, inc_out, slot_out) = (&mut row_out[e0..e1], &mut inc_out[i0..i1], &mut slot_out[s0..s1]);
-                let block_out = &mut block_out[b0..b1];
-                let mut slot = starts[j][2];
-                match &columns[j] {
-                    Column::Kept(old) => {
-                        let old_col = old.symbolic.col_ptr();
-                        row_out.copy_from_slice(&old.symbolic.row_idx()[old_col[3 * j]..old_col[3 * j + 3]]);
-                        block_out.copy_from_slice(old.blocks.column_rows(j));
-                        let mut written = 0;
-                        for (out, inc) in inc_out.iter_mut().zip(old.column_incidences(j)) {
-                            let (from, size) = (inc.slots as usize, inc.size as usize);
-                            let (batch, element) = store.locate(inc.id);
-                            *out = Incidence { batch, element, slots: slot as u32, ..*inc };
-                            slot_out[written..written + size].copy_from_slice(&old.slots[from..from + size]);
-                            (written, slot) = (written + size, slot + size);
-                        }
-                    }
-                    Column::New(new_incidences) => {
-                        let r = &rows[j];
-                        block_out.copy_from_slice(r);
-                        let third = 3 * r.len();
-                        for (out, &i) in row_out[..third].chunks_exact_mut(3).zip(r) {
-                            out.copy_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
-                        }
-                        row_out.copy_within(..third, third);
-                        row_out.copy_within(..third, 2 * third);
-                        let position = |i: u32| -> u32 {
-                            let p = r.binary_search(&i).expect("pattern holds every element pair");
-                            u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
-                        };
-                        let mut written = 0;
-                        for (out, inc) in inc_out.iter_mut().zip(new_incidences) {
-                            *out = Incidence { slots: slot as u32, ..*inc };
-                            let nodes = store.blocks(inc.batch as usize, inc.element as usize);
-                            for (s, &a) in slot_out[written..written + nodes.len()].iter_mut().zip(nodes) {
-                                *s = position(a);
-                            }
-                            (written, slot) = (written + nodes.len(), slot + nodes.len());
-                        }
-                    }
-                }
-            }
-        });
+        let diagonal: Vec<Vec<u32>> = runs
+            .into_par_iter()
+            .map(|(range, row_out, block_out, inc_out, slot_out)| {
+                let base = starts[range.start];
+                range
+                    .map(|j| {
+                        let [b, i, s] = std::array::from_fn(|k| starts[j][k] - base[k]);
+                        let [bs, is, ss] = sizes(&columns[j]);
+                        let (row_out, block_out) = (&mut row_out[9 * b..9 * (b + bs)], &mut block_out[b..b + bs]);
+                        let (inc_out, slot_out) = (&mut inc_out[i..i + is], &mut slot_out[s..s + ss]);
+                        columns[j].write(j, store, row_out, block_out, inc_out, slot_out)
+                    })
+                    .collect()
+            })
+            .collect();
+        let diagonal: Vec<u32> = diagonal.into_iter().flatten().collect();
+        let col_stride: Vec<usize> = columns.iter().map(|c| 3 * c.rows.len()).collect();
+        let n = 3 * num_blocks;
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        col_ptr.extend((0..n).map(|c| 9 * starts[c / 3][0] + (c % 3) * col_stride[c / 3]));
+        col_ptr.push(9 * at[0]);
+        let to_u32 = |k: usize| -> Vec<u32> {
+            starts.iter().map(|s| u32::try_from(s[k]).expect("fewer than 2^32 incidences and slots")).collect()
+        };
         let symbolic = checked_columns(n, col_ptr, row_idx);
-        let block_ptr = starts.iter().map(|s| u32::try_from(s[3]).expect("fewer than 2^32 blocks")).collect();
-        let block_start = starts[..num_blocks].iter().map(|s| s[0]).collect();
-        let blocks = BlockStructure::from_columns(block_ptr, block_rows, block_start, at[0])
-            .expect("the layout writes ordered block columns");
+        let blocks = block_structure(&symbolic, block_rows);
         SparsePattern {
             num_blocks,
             symbolic,
             blocks,
             col_stride,
-            offsets,
+            offsets: to_u32(1),
+            slot_offsets: to_u32(2),
             incidences,
             slots,
             diagonal,
-            spare: Buffers::default(),
         }
     }
 
@@ -542,16 +676,18 @@ impl SparsePattern {
             let (stride, base) = (self.col_stride[j], col_ptr[3 * j]);
             // SAFETY (every write below): entries of columns 3j..3j+3
             // belong to this node task only, and lie in `values`
-            for p in col_ptr[3 * j]..col_ptr[3 * j + 3] {
+            for p in base..base + 3 * stride {
                 unsafe { *values.add(p) = 0.0 };
             }
             let (first, end) = (self.offsets[j] as usize, self.offsets[j + 1] as usize);
+            let first_slot = self.slot_offsets[j] as usize;
             for t in first..end {
                 if let Some(ahead) = self.incidences.get(t + PREFETCH_AHEAD) {
                     prefetch(ahead.batch as usize, ahead.element as usize);
                 }
                 let inc = &self.incidences[t];
-                let slots = &self.slots[inc.slots as usize..(inc.slots + inc.size) as usize];
+                let at = first_slot + inc.slots as usize;
+                let slots = &self.slots[at..at + inc.size as usize];
                 let scratch = &mut scratch[..slots.len()];
                 blocks(inc.batch as usize, inc.element as usize, inc.local as usize, scratch);
                 for (kab, &slot) in scratch.iter().zip(slots) {
@@ -577,7 +713,7 @@ impl SparsePattern {
     {
         out.par_iter_mut().with_min_len(256).enumerate().for_each(|(j, o)| {
             let mut s = [0.0; 3];
-            for inc in &self.incidences[self.offsets[j] as usize..self.offsets[j + 1] as usize] {
+            for inc in self.column_incidences(j) {
                 let v = element_vector(inc.batch as usize, inc.element as usize, inc.local as usize);
                 s = [s[0] + v[0], s[1] + v[1], s[2] + v[2]];
             }
