@@ -306,7 +306,10 @@ impl PolyMesh {
     /// Checks that every edge of element `e` is used by exactly two of its
     /// faces in opposite directions.
     fn check_element_closed(&self, e: usize) -> Result<(), MeshError> {
-        let mut uses: HashMap<(u32, u32), (usize, i32)> = HashMap::default();
+        // every directed use of an edge as (lower node, higher node, +1 along
+        // it or -1 against), sorted: the uses of one edge lie together (a
+        // sort, not a hash map: a cut checks thousands of elements)
+        let mut uses: Vec<((u32, u32), i32)> = Vec::new();
         for r in &self.elements[e].faces {
             let v = &self.faces[r.face as usize].vertices;
             for i in 0..v.len() {
@@ -314,18 +317,16 @@ impl PolyMesh {
                 if !r.outward {
                     std::mem::swap(&mut a, &mut b);
                 }
-                let entry = uses.entry((a.min(b), a.max(b))).or_insert((0, 0));
-                entry.0 += 1;
-                entry.1 += if a < b { 1 } else { -1 };
+                uses.push(((a.min(b), a.max(b)), if a < b { 1 } else { -1 }));
             }
         }
-        let mut edges: Vec<_> = uses.into_iter().collect();
-        edges.sort_unstable_by_key(|(k, _)| *k);
-        for (edge, (count, balance)) in edges {
+        uses.sort_unstable();
+        for edge_uses in uses.chunk_by(|x, y| x.0 == y.0) {
+            let (edge, count) = (edge_uses[0].0, edge_uses.len());
             if count != 2 {
                 return Err(MeshError::OpenElement { element: e, edge, count });
             }
-            if balance != 0 {
+            if edge_uses.iter().map(|u| u.1).sum::<i32>() != 0 {
                 return Err(MeshError::InconsistentOrientation { element: e, edge });
             }
         }
