@@ -189,15 +189,25 @@ impl Simulation {
         origins.extend(&mut state.velocity);
         origins.extend(&mut state.previous_velocity);
         let n = mesh.nodes.len();
-        let t = std::time::Instant::now();
-        self.pattern.update(n, &*store, touched, &cut.old_nodes);
-        self.timings.add(Phase::Assembly, t.elapsed().as_secs_f64());
-        self.masses = store.lumped_masses(n, self.params.material.density);
-        self.loads.clone_from(&self.masses);
-        state.refresh_positions(&mesh.nodes);
-        conserve_momentum(&changed_nodes, &self.masses, &state.position, &mut state.velocity, before);
-        let warp = self.params.corotated;
-        nodal.corotation.apply_changes(store, &changes, &state.position, warp);
+        // the pattern's update (mostly moving its arrays, on one thread) and
+        // the masses, momenta and rotations (which do not read it) at once
+        let (store, corotation, pattern) = (&nodal.store, &mut nodal.corotation, &mut self.pattern);
+        let (masses, loads, p) = (&mut self.masses, &mut self.loads, &self.params);
+        let (pattern_seconds, ()) = rayon::join(
+            || {
+                let t = std::time::Instant::now();
+                pattern.update(n, store, touched, &cut.old_nodes);
+                t.elapsed().as_secs_f64()
+            },
+            || {
+                *masses = store.lumped_masses(n, p.material.density);
+                loads.clone_from(masses);
+                state.refresh_positions(&mesh.nodes);
+                conserve_momentum(&changed_nodes, masses, &state.position, &mut state.velocity, before);
+                corotation.apply_changes(store, &changes, &state.position, p.corotated);
+            },
+        );
+        self.timings.add(Phase::Assembly, pattern_seconds);
         let p = &self.params;
         self.system.renew(p.solver, &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
