@@ -121,37 +121,31 @@ impl CoarseSpace {
                 }
             }
         };
-        // runs are counted, then listed, column by column in parallel (and
-        // in order)
-        let counts: Vec<u32> = (0..n)
+        // every task of columns lists its columns' runs (in parallel, in
+        // order), then the lists are laid end to end
+        let tasks: Vec<std::ops::Range<usize>> =
+            (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
+        let listed: Vec<(Vec<u32>, Vec<u32>)> = tasks
             .into_par_iter()
-            .map_init(Vec::new, |seen, j| {
-                aggregates_of(j, seen);
-                seen.len() as u32
+            .map(|columns| {
+                let (mut seen, mut counts, mut aggregates) = (Vec::new(), Vec::new(), Vec::new());
+                for j in columns {
+                    aggregates_of(j, &mut seen);
+                    counts.push(seen.len() as u32);
+                    aggregates.extend_from_slice(&seen);
+                }
+                (counts, aggregates)
             })
             .collect();
         let mut run_ptr = Vec::with_capacity(n + 1);
         run_ptr.push(0u32);
-        for c in counts {
-            run_ptr.push(run_ptr.last().expect("starts with 0") + c);
+        for count in listed.iter().flat_map(|(counts, _)| counts) {
+            run_ptr.push(run_ptr[run_ptr.len() - 1] + count);
         }
-        // (each task of columns writes its own stretch of the runs)
-        let runs = *run_ptr.last().expect("starts with 0") as usize;
         let (mut run_aggregate, mut run_sums) = (old.run_aggregate, old.run_sums);
-        run_aggregate.resize(runs, 0);
-        run_sums.resize(runs, [0.0; 18]);
-        let tasks: Vec<std::ops::Range<usize>> =
-            (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
-        let lengths = tasks.iter().map(|t| (run_ptr[t.end] - run_ptr[t.start]) as usize);
-        let aggregates = crate::stretches(&mut run_aggregate, lengths);
-        tasks.into_par_iter().zip(aggregates).for_each(|(columns, aggregates)| {
-            let (mut seen, mut k) = (Vec::new(), 0);
-            for j in columns {
-                aggregates_of(j, &mut seen);
-                aggregates[k..k + seen.len()].copy_from_slice(&seen);
-                k += seen.len();
-            }
-        });
+        run_aggregate.clear();
+        listed.iter().for_each(|(_, aggregates)| run_aggregate.extend_from_slice(aggregates));
+        run_sums.resize(run_aggregate.len(), [0.0; 18]);
         CoarseSpace {
             of,
             ptr,
@@ -419,26 +413,36 @@ fn aggregate(ptr: &[u32], adj: &[u32]) -> (Vec<u32>, usize) {
 
 /// The graph of the aggregates `of` (`count` of them): two aggregates are
 /// neighbours when any of their vertices are.
+/// (The aggregates' neighbour lists are made in parallel, each in its own
+/// order, then sorted: the graph does not depend on the thread count.)
 fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Vec<u32>) {
     let (vertex_ptr, vertices) = group(of, count);
-    let (mut out_ptr, mut out_adj) = (Vec::with_capacity(count + 1), Vec::new());
-    out_ptr.push(0u32);
-    let mut seen = vec![FREE; count];
-    for a in 0..count {
-        let start = out_adj.len();
-        for &v in &vertices[vertex_ptr[a] as usize..vertex_ptr[a + 1] as usize] {
-            for &u in &adj[ptr[v as usize] as usize..ptr[v as usize + 1] as usize] {
-                let b = of[u as usize];
-                if seen[b as usize] != a as u32 {
-                    seen[b as usize] = a as u32;
-                    out_adj.push(b);
+    let lists: Vec<Vec<u32>> = (0..count)
+        .into_par_iter()
+        .map_init(
+            || vec![FREE; count],
+            |seen, a| {
+                let mut list = Vec::new();
+                for &v in &vertices[vertex_ptr[a] as usize..vertex_ptr[a + 1] as usize] {
+                    for &u in &adj[ptr[v as usize] as usize..ptr[v as usize + 1] as usize] {
+                        let b = of[u as usize];
+                        if seen[b as usize] != a as u32 {
+                            seen[b as usize] = a as u32;
+                            list.push(b);
+                        }
+                    }
                 }
-            }
-        }
-        out_adj[start..].sort_unstable();
-        out_ptr.push(out_adj.len() as u32);
+                list.sort_unstable();
+                list
+            },
+        )
+        .collect();
+    let mut out_ptr = Vec::with_capacity(count + 1);
+    out_ptr.push(0u32);
+    for list in &lists {
+        out_ptr.push(out_ptr[out_ptr.len() - 1] + list.len() as u32);
     }
-    (out_ptr, out_adj)
+    (out_ptr, lists.concat())
 }
 
 /// The vertices of each group of `of` (`count` groups), ascending: group
