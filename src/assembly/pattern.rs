@@ -466,10 +466,16 @@ impl SparsePattern {
         // the columns that stay the same move, then the new ones are written
         let (_, _, _, _, mut row_idx) = std::mem::replace(&mut self.symbolic, Self::empty().symbolic).into_parts();
         let mut block_rows = std::mem::take(&mut self.blocks).into_rows();
-        relocate(&mut row_idx, &dirty, &old_values, &values, 0);
-        relocate(&mut block_rows, &dirty, &old_rows, &rows, 0);
-        relocate(&mut self.incidences, &dirty, &old_incidences, &incidences, UNSET);
-        relocate(&mut self.slots, &dirty, &old_slots, &slots, 0);
+        // (the scalar rows, most of the bytes, beside the other arrays)
+        let (incidence_array, slot_array) = (&mut self.incidences, &mut self.slots);
+        rayon::join(
+            || relocate(&mut row_idx, &dirty, &old_values, &values, 0),
+            || {
+                relocate(&mut block_rows, &dirty, &old_rows, &rows, 0);
+                relocate(incidence_array, &dirty, &old_incidences, &incidences, UNSET);
+                relocate(slot_array, &dirty, &old_slots, &slots, 0);
+            },
+        );
         grow(&mut self.col_stride, num_blocks, 0);
         grow(&mut self.diagonal, num_blocks, 0);
         for (column, &j) in new.iter().zip(&dirty_list) {
