@@ -98,13 +98,16 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
 /// surface without reflex edges bounds a convex body. The loops run
 /// counter-clockwise seen from outside. Negative for a strictly convex
 /// surface.
-pub fn fold_depth<K: Copy + Eq + std::hash::Hash + Ord>(loops: &[Vec<(K, [f64; 3])>]) -> f64 {
+pub fn fold_depth<K: Copy + Ord>(loops: &[Vec<(K, [f64; 3])>]) -> f64 {
+    let (mut points, mut order) = (Vec::new(), Vec::new());
     let planes: Vec<([f64; 3], [f64; 3])> = loops
         .iter()
         .map(|lp| {
-            let pts: Vec<[f64; 3]> = lp.iter().map(|p| p.1).collect();
-            let idx: Vec<u32> = (0..pts.len() as u32).collect();
-            let g = face_geometry(&pts, &idx);
+            points.clear();
+            points.extend(lp.iter().map(|p| p.1));
+            order.clear();
+            order.extend(0..points.len() as u32);
+            let g = face_geometry(&points, &order);
             (g.centroid, g.normal)
         })
         .collect();
@@ -112,18 +115,22 @@ pub fn fold_depth<K: Copy + Eq + std::hash::Hash + Ord>(loops: &[Vec<(K, [f64; 3
         let (c, n) = planes[f];
         loops[g].iter().map(|p| dot(sub(p.1, c), n)).fold(f64::NEG_INFINITY, f64::max)
     };
-    let mut edges: rustc_hash::FxHashMap<(K, K), usize> = Default::default();
-    let mut worst = f64::NEG_INFINITY;
+    // every loop's edges, sorted: a loop meets the first loop (in loop
+    // order) that holds the same edge (a sort, not a hash map: cuts and
+    // element builds measure thousands of elements)
+    let mut edges: Vec<((K, K), usize)> = Vec::with_capacity(loops.iter().map(Vec::len).sum());
     for (k, lp) in loops.iter().enumerate() {
         for i in 0..lp.len() {
             let (a, b) = (lp[i].0, lp[(i + 1) % lp.len()].0);
-            let key = (a.min(b), a.max(b));
-            match edges.get(&key) {
-                Some(&other) => worst = worst.max(outside(k, other).min(outside(other, k))),
-                None => {
-                    edges.insert(key, k);
-                }
-            }
+            edges.push(((a.min(b), a.max(b)), k));
+        }
+    }
+    edges.sort_unstable();
+    let mut worst = f64::NEG_INFINITY;
+    for uses in edges.chunk_by(|x, y| x.0 == y.0) {
+        let first = uses[0].1;
+        for &(_, k) in &uses[1..] {
+            worst = worst.max(outside(k, first).min(outside(first, k)));
         }
     }
     worst
