@@ -275,20 +275,25 @@ pub(crate) fn classify(
             *entry = entry.min(r);
         }
     }
-    let side: Vec<i8> = dist
+    // (a node's side from its distance's sign, NaN on the negative side;
+    // then the nodes with a snapping radius that lie within it)
+    let mut side: Vec<i8> = dist
         .iter()
-        .enumerate()
-        .map(|(v, &d)| {
-            let r = radius.get(&(v as u32)).copied().unwrap_or(0.0);
-            if d == 0.0 || d.abs() <= r {
-                0
-            } else if d > 0.0 {
+        .map(|&d| {
+            if d > 0.0 {
                 1
+            } else if d == 0.0 {
+                0
             } else {
                 -1
             }
         })
         .collect();
+    for (&v, &r) in &radius {
+        if dist[v as usize].abs() <= r {
+            side[v as usize] = 0;
+        }
+    }
     let mut on_plane: Vec<u32> = radius.keys().copied().filter(|&v| side[v as usize] == 0).collect();
     on_plane.sort_unstable();
     let has_both = |e: usize| {
