@@ -71,13 +71,13 @@ impl Simulation {
         if !(plane.check().is_ok() && self.pattern.num_blocks == mesh.nodes.len()) {
             return None;
         }
-        let mut listed: Vec<u32> = (0..mesh.nodes.len())
+        // (marked, then listed in order: each element sits at several nodes)
+        let mut marked = vec![false; mesh.elements.len()];
+        (0..mesh.nodes.len())
             .filter(|&v| reach.contains(mesh.nodes[v], diameters[v]))
             .flat_map(|v| self.pattern.elements_at(v))
-            .collect();
-        listed.sort_unstable();
-        listed.dedup();
-        Some(listed)
+            .for_each(|e| marked[e as usize] = true);
+        Some((0..mesh.elements.len() as u32).filter(|&e| marked[e as usize]).collect())
     }
 
     /// Runs `cut` (a cut along `plane`, or along `polygon` in it, leaving
