@@ -338,6 +338,23 @@ fn relocate<T: Copy>(array: &mut Vec<T>, recomputed: &[bool], old: &[usize], new
     array.truncate(end);
 }
 
+/// The stretches of `array` that the columns `listed` (ascending) take,
+/// column `listed[k]` from `starts[listed[k]]` on, `len(k)` items long.
+fn columns_of<'a, T>(
+    array: &'a mut [T],
+    listed: &[usize],
+    starts: &[usize],
+    len: impl Fn(usize) -> usize,
+) -> Vec<&'a mut [T]> {
+    let mut lengths = Vec::with_capacity(2 * listed.len());
+    let mut at = 0;
+    for (k, &j) in listed.iter().enumerate() {
+        lengths.extend([starts[j] - at, len(k)]);
+        at = starts[j] + len(k);
+    }
+    crate::stretches(array, lengths).into_iter().skip(1).step_by(2).collect()
+}
+
 /// The block structure of the compressed columns `symbolic`, whose block
 /// column `j` has its block rows at `rows[col_ptr[3 j] / 9..]`.
 fn block_structure(symbolic: &SymbolicSparseColMat<usize>, rows: Vec<u32>) -> BlockStructure {
@@ -478,18 +495,21 @@ impl SparsePattern {
         );
         grow(&mut self.col_stride, num_blocks, 0);
         grow(&mut self.diagonal, num_blocks, 0);
-        for (column, &j) in new.iter().zip(&dirty_list) {
-            let (v, b, i, s) = (values[j], rows[j], incidences[j], slots[j]);
-            let len = column.rows.len();
-            self.diagonal[j] = column.write(
-                j,
-                store,
-                &mut row_idx[v..v + 9 * len],
-                &mut block_rows[b..b + len],
-                &mut self.incidences[i..i + column.incidences.len()],
-                &mut self.slots[s..s + column.slots()],
-            );
-            self.col_stride[j] = 3 * len;
+        // the new columns written in parallel, each into its own stretches
+        let sizes: Vec<[usize; 4]> =
+            new.iter().map(|c| [9 * c.rows.len(), c.rows.len(), c.incidences.len(), c.slots()]).collect();
+        let row_parts = columns_of(&mut row_idx, &dirty_list, &values, |k| sizes[k][0]);
+        let block_parts = columns_of(&mut block_rows, &dirty_list, &rows, |k| sizes[k][1]);
+        let inc_parts = columns_of(&mut self.incidences, &dirty_list, &incidences, |k| sizes[k][2]);
+        let slot_parts = columns_of(&mut self.slots, &dirty_list, &slots, |k| sizes[k][3]);
+        let diagonals: Vec<u32> = (new.par_iter().zip(&dirty_list).zip(row_parts).zip(block_parts))
+            .zip(inc_parts.into_par_iter().zip(slot_parts))
+            .map(|((((column, &j), row_out), block_out), (inc_out, slot_out))| {
+                column.write(j, store, row_out, block_out, inc_out, slot_out)
+            })
+            .collect();
+        for ((&j, column), diagonal) in dirty_list.iter().zip(&new).zip(diagonals) {
+            (self.diagonal[j], self.col_stride[j]) = (diagonal, 3 * column.rows.len());
         }
         let n = 3 * num_blocks;
         let col_ptr: Vec<usize> =
