@@ -148,7 +148,7 @@ impl<'de> serde::Deserialize<'de> for SparsePattern {
             rows_ok
                 && slots.iter().all(|&slot| slot % 3 == 0 && (slot as usize) < stride)
                 && incidences.iter().all(|inc| {
-                    (inc.size as usize) <= MAX_ENTRY_BLOCKS && (inc.slots + inc.size) as usize <= slots.len()
+                    (inc.size as usize) <= MAX_ENTRY_BLOCKS && inc.slots as usize + inc.size as usize <= slots.len()
                 })
         };
         if !(lengths_ok && (0..nb).all(column_ok)) {
@@ -246,10 +246,10 @@ impl NewColumn {
         self.incidences.iter().map(|inc| inc.size as usize).sum()
     }
 
-    /// Writes the column into its stretches of the arrays: the scalar rows (`9 len` of
-    /// `row_out`, the block rows three times over), the block rows, the
-    /// incidences (their slots counted from the node's first) and the
-    /// slots; returns the diagonal block's offset.
+    /// Writes the column into its stretches of the arrays: the scalar rows
+    /// (`9 len` of `row_out`, the block rows three times over), the block
+    /// rows, the incidences (their slots counted from the node's first) and
+    /// the slots; returns the diagonal block's offset.
     fn write(
         &self,
         j: usize,
@@ -299,23 +299,23 @@ fn new_starts(old: &[usize], fresh: impl Fn(usize) -> Option<usize>, n: usize) -
     starts
 }
 
-/// Moves the columns that were not recomputed (those with `fresh[j]`
-/// false) from their `old` starts to their `new` ones. Columns between two
+/// Moves the columns that were not `recomputed` from their `old` starts to
+/// their `new` ones. Columns between two
 /// recomputed ones move together, by one `copy_within`; the stretches
 /// moving up go first, the last first, then those moving down, the first
 /// first: the columns keep their order, so none is overwritten before it
 /// moves (a recomputed column's old items are not needed).
-fn move_columns<T: Copy>(array: &mut [T], fresh: &[bool], old: &[usize], new: &[usize]) {
+fn move_columns<T: Copy>(array: &mut [T], recomputed: &[bool], old: &[usize], new: &[usize]) {
     let kept = old.len() - 1;
     let mut stretches: Vec<(usize, usize)> = Vec::new();
     let mut j = 0;
     while j < kept {
-        if fresh[j] {
+        if recomputed[j] {
             j += 1;
             continue;
         }
         let first = j;
-        while j < kept && !fresh[j] {
+        while j < kept && !recomputed[j] {
             j += 1;
         }
         stretches.push((first, j));
