@@ -355,6 +355,18 @@ fn columns_of<'a, T>(
     crate::stretches(array, lengths).into_iter().skip(1).step_by(2).collect()
 }
 
+/// The scalar column pointers of block columns whose values start at
+/// `values[j]` (the last entry their end), `col_stride[j]` apart.
+fn column_pointers(values: &[usize], col_stride: &[usize]) -> Vec<usize> {
+    let n = 3 * col_stride.len();
+    (0..n).map(|c| values[c / 3] + (c % 3) * col_stride[c / 3]).chain([values[n / 3]]).collect()
+}
+
+/// Offsets into the incidences or the slots, as the pattern keeps them.
+fn narrow(offsets: impl Iterator<Item = usize>) -> Vec<u32> {
+    offsets.map(|o| u32::try_from(o).expect("fewer than 2^32 incidences and slots")).collect()
+}
+
 /// The block structure of the compressed columns `symbolic`, whose block
 /// column `j` has its block rows at `rows[col_ptr[3 j] / 9..]`.
 fn block_structure(symbolic: &SymbolicSparseColMat<usize>, rows: Vec<u32>) -> BlockStructure {
@@ -512,11 +524,8 @@ impl SparsePattern {
             (self.diagonal[j], self.col_stride[j]) = (diagonal, 3 * column.rows.len());
         }
         let n = 3 * num_blocks;
-        let col_ptr: Vec<usize> =
-            (0..n).map(|c| values[c / 3] + (c % 3) * self.col_stride[c / 3]).chain([values[num_blocks]]).collect();
-        let to_u32 =
-            |v: &[usize]| v.iter().map(|&o| u32::try_from(o).expect("fewer than 2^32 incidences and slots")).collect();
-        (self.offsets, self.slot_offsets) = (to_u32(&incidences), to_u32(&slots));
+        let col_ptr = column_pointers(&values, &self.col_stride);
+        (self.offsets, self.slot_offsets) = (narrow(incidences.iter().copied()), narrow(slots.iter().copied()));
         // the elements the store moved into the vacated places
         for &(b, i) in &vacated {
             if (i as usize) >= store.entries(b as usize) {
@@ -609,21 +618,16 @@ impl SparsePattern {
         let diagonal: Vec<u32> = diagonal.into_iter().flatten().collect();
         let col_stride: Vec<usize> = columns.iter().map(|c| 3 * c.rows.len()).collect();
         let n = 3 * num_blocks;
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        col_ptr.extend((0..n).map(|c| 9 * starts[c / 3][0] + (c % 3) * col_stride[c / 3]));
-        col_ptr.push(9 * at[0]);
-        let to_u32 = |k: usize| -> Vec<u32> {
-            starts.iter().map(|s| u32::try_from(s[k]).expect("fewer than 2^32 incidences and slots")).collect()
-        };
-        let symbolic = checked_columns(n, col_ptr, row_idx);
+        let values: Vec<usize> = starts.iter().map(|s| 9 * s[0]).collect();
+        let symbolic = checked_columns(n, column_pointers(&values, &col_stride), row_idx);
         let blocks = block_structure(&symbolic, block_rows);
         SparsePattern {
             num_blocks,
             symbolic,
             blocks,
             col_stride,
-            offsets: to_u32(1),
-            slot_offsets: to_u32(2),
+            offsets: narrow(starts.iter().map(|s| s[1])),
+            slot_offsets: narrow(starts.iter().map(|s| s[2])),
             incidences,
             slots,
             diagonal,
