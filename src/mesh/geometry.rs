@@ -31,8 +31,15 @@ impl Plane {
 
     /// [`Plane::distance`] of every point.
     pub fn distances(&self, points: &[[f64; 3]]) -> Vec<f64> {
-        let n = scale(self.normal, 1.0 / norm(self.normal));
-        points.iter().map(|&x| dot(sub(x, self.point), n)).collect()
+        points.iter().map(self.distance_to()).collect()
+    }
+
+    /// [`Plane::distance`] as the function [`Plane::distances`] applies
+    /// (the unit normal computed once: the same value for the same point,
+    /// to the last bit, whichever of the two gives it).
+    pub fn distance_to(&self) -> impl Fn(&[f64; 3]) -> f64 + Copy + Send + Sync {
+        let (n, point) = (scale(self.normal, 1.0 / norm(self.normal)), self.point);
+        move |x| dot(sub(*x, point), n)
     }
 }
 

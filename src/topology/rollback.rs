@@ -14,6 +14,7 @@ use super::split::on_plane_band;
 use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{Element, Face, FaceRef, PolyMesh};
+use rayon::prelude::*;
 
 /// What a cut may change, saved before it runs (flat, so saving costs no
 /// allocation per element or face).
@@ -42,13 +43,18 @@ struct Flat<T> {
 }
 
 impl<T: Copy> Flat<T> {
-    fn new() -> Self {
-        Flat { values: Vec::new(), ends: Vec::new() }
-    }
-
-    fn push(&mut self, list: &[T]) {
-        self.values.extend_from_slice(list);
-        self.ends.push(self.values.len());
+    /// The `lists`, one after another (two passes: sized, then filled).
+    fn of<'a>(lists: impl Iterator<Item = &'a [T]> + Clone) -> Self
+    where
+        T: 'a,
+    {
+        let (count, total) = lists.clone().fold((0, 0), |(c, t), list| (c + 1, t + list.len()));
+        let (mut values, mut ends) = (Vec::with_capacity(total), Vec::with_capacity(count));
+        for list in lists {
+            values.extend_from_slice(list);
+            ends.push(values.len());
+        }
+        Flat { values, ends }
     }
 
     fn get(&self, i: usize) -> Vec<T> {
@@ -63,19 +69,27 @@ impl Rollback {
     /// the elements in `scope` are looked at (they hold all of those).
     pub fn around_plane(mesh: &PolyMesh, plane: &Plane, scope: CutScope) -> Self {
         let band = on_plane_band(mesh);
-        let dist = plane.distances(&mesh.nodes);
+        let distance = plane.distance_to();
+        let candidates: Vec<usize> = scope.elements(mesh).collect();
+        // (each element's test reads only its own nodes: in parallel)
+        let reaching: Vec<usize> = candidates
+            .par_iter()
+            .copied()
+            .filter(|&e| {
+                let (lo, hi) =
+                    mesh.elements[e].nodes.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                        let d = distance(&mesh.nodes[v as usize]);
+                        (lo.min(d), hi.max(d))
+                    });
+                // a NaN plane reaches everything
+                !(lo > band || hi < -band)
+            })
+            .collect();
         let mut near = vec![false; mesh.nodes.len()];
-        for e in scope.elements(mesh) {
-            let el = &mesh.elements[e];
-            let (lo, hi) = el.nodes.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
-                (lo.min(dist[v as usize]), hi.max(dist[v as usize]))
-            });
-            // a NaN plane reaches everything
-            if !(lo > band || hi < -band) {
-                el.nodes.iter().for_each(|&v| near[v as usize] = true);
-            }
+        for e in reaching {
+            mesh.elements[e].nodes.iter().for_each(|&v| near[v as usize] = true);
         }
-        Self::save(mesh, scope.elements(mesh), &near, Vec::new())
+        Self::save(mesh, &candidates, &near, Vec::new())
     }
 
     /// Saves what a change that moves `nodes` and rewires the elements
@@ -85,7 +99,8 @@ impl Rollback {
         let mut near = vec![false; mesh.nodes.len()];
         nodes.iter().for_each(|&v| near[v as usize] = true);
         let positions = nodes.iter().map(|&v| (v, mesh.nodes[v as usize])).collect();
-        Self::save(mesh, 0..mesh.elements.len(), &near, positions)
+        let candidates: Vec<usize> = (0..mesh.elements.len()).collect();
+        Self::save(mesh, &candidates, &near, positions)
     }
 
     /// The ids of the saved elements, in increasing order.
@@ -95,41 +110,34 @@ impl Rollback {
 
     /// Saves the elements among `candidates` (in increasing order) holding
     /// a `near` node, their faces, and `positions`.
-    fn save(
-        mesh: &PolyMesh,
-        candidates: impl Iterator<Item = usize>,
-        near: &[bool],
-        positions: Vec<(u32, [f64; 3])>,
-    ) -> Self {
-        let mut saved = Rollback {
+    fn save(mesh: &PolyMesh, candidates: &[usize], near: &[bool], positions: Vec<(u32, [f64; 3])>) -> Self {
+        // (found in parallel, saved in order, each array allocated once)
+        let elements_saved: Vec<u32> = candidates
+            .par_iter()
+            .filter(|&&e| mesh.elements[e].nodes.iter().any(|&v| near[v as usize]))
+            .map(|&e| e as u32)
+            .collect();
+        let elements = elements_saved.iter().map(|&e| &mesh.elements[e as usize]);
+        let element_faces = Flat::of(elements.clone().map(|el| &el.faces[..]));
+        let element_nodes = Flat::of(elements.map(|el| &el.nodes[..]));
+        let mut faces_saved: Vec<u32> = element_faces.values.iter().map(|r| r.face).collect();
+        faces_saved.par_sort_unstable();
+        faces_saved.dedup();
+        let faces = faces_saved.iter().map(|&f| &mesh.faces[f as usize]);
+        let face_vertices = Flat::of(faces.clone().map(|face| &face.vertices[..]));
+        let face_triangles = Flat::of(faces.map(|face| &face.triangles[..]));
+        Rollback {
             nodes: mesh.nodes.len(),
             faces: mesh.faces.len(),
             elements: mesh.elements.len(),
-            elements_saved: Vec::new(),
-            element_faces: Flat::new(),
-            element_nodes: Flat::new(),
-            faces_saved: Vec::new(),
-            face_vertices: Flat::new(),
-            face_triangles: Flat::new(),
+            elements_saved,
+            element_faces,
+            element_nodes,
+            faces_saved,
+            face_vertices,
+            face_triangles,
             positions,
-        };
-        for e in candidates {
-            let el = &mesh.elements[e];
-            if el.nodes.iter().any(|&v| near[v as usize]) {
-                saved.elements_saved.push(e as u32);
-                saved.element_faces.push(&el.faces);
-                saved.element_nodes.push(&el.nodes);
-                saved.faces_saved.extend(el.faces.iter().map(|r| r.face));
-            }
         }
-        saved.faces_saved.sort_unstable();
-        saved.faces_saved.dedup();
-        for &f in &saved.faces_saved {
-            let face = &mesh.faces[f as usize];
-            saved.face_vertices.push(&face.vertices);
-            saved.face_triangles.push(&face.triangles);
-        }
-        saved
     }
 
     /// Whether element `e` (of the mesh before the cut) was saved.
