@@ -29,17 +29,22 @@
 //!    Rayleigh quotient (an estimate from above, within a few percent where
 //!    the next eigenvalues lie close to `λ₇`, exact for a converged vector).
 //!
-//! Cost `O(n³/3 + (POWER_STEPS + 2 INVERSE_STEPS) n²)` flops at most, and
-//! no allocation: the caller passes [`spectrum_scratch_len`] values of
-//! scratch. `cargo bench --bench cut -- health_spectrum` measures it (AMD
-//! EPYC, AVX-512: 22 µs for a hexahedron's 24 x 24 `K_e` with fixed 30 + 30
-//! steps and sequential sums, 9 µs now, most of it the triangular solves'
-//! chain of dependent updates, which wider registers do not shorten: the
-//! kernel is not dispatched). Deterministic (fixed start vectors,
-//! fixed summation order: see `lanes::ordered_dot`), so the result
-//! does not depend on the thread that computes it.
+//! Cost `O(n³/3 + (POWER_STEPS + 2 INVERSE_STEPS) n²)` flops at most per
+//! element. [`stiffness_spectra`] runs the estimates of several elements of
+//! one size at once, one element per SIMD lane (each lane stops iterating
+//! where its own element's estimate settles, its values then held): the
+//! elements of a cut are many small matrices, whose triangular solves are
+//! chains of dependent updates that only more elements, not wider rows,
+//! fill. The lanes take the same operations in the same order as the
+//! scalar reference (no fused multiply-add, every sum in index order), so
+//! every element's estimates are the same bits at every SIMD level, alone
+//! or beside any other elements: the result depends neither on the thread
+//! that computes it nor on the machine. `cargo bench --bench cut --
+//! health_spectrum` measures one element and a group of a lane width.
 
-use crate::lanes::ordered_dot as dot;
+use pulp::Simd;
+
+use crate::lanes::{Lanes, Real};
 
 /// Most power iteration steps for `λ_max`.
 pub const POWER_STEPS: usize = 30;
@@ -75,46 +80,6 @@ impl Spectrum {
     }
 }
 
-/// Scratch values [`stiffness_spectrum`] needs for `k` nodes.
-pub fn spectrum_scratch_len(k: usize) -> usize {
-    let n = 3 * k;
-    n * n + 9 * n
-}
-
-/// `y = K x` for a dense row-major `n x n` matrix.
-fn mat_vec(k: &[f64], x: &[f64], y: &mut [f64]) {
-    let n = x.len();
-    for (yr, row) in y.iter_mut().zip(k.chunks_exact(n)) {
-        *yr = dot(row, x);
-    }
-}
-
-/// Scales `v` to unit length; returns its former length.
-fn normalise(v: &mut [f64]) -> f64 {
-    let len = dot(v, v).sqrt();
-    if len > 0.0 {
-        v.iter_mut().for_each(|x| *x /= len);
-    }
-    len
-}
-
-/// A fixed, deterministic start vector with no special structure.
-fn start_vector(v: &mut [f64]) {
-    for (i, x) in v.iter_mut().enumerate() {
-        *x = 1.0 + 0.5 * ((i * 7919) % 13) as f64 / 13.0 - 0.25 * (i % 3) as f64;
-    }
-}
-
-/// Removes from `v` its components along the `q` columns (orthonormal).
-fn project_out(v: &mut [f64], q: &[f64], n: usize) {
-    for m in q.chunks_exact(n) {
-        let s = dot(v, m);
-        for (x, y) in v.iter_mut().zip(m) {
-            *x -= s * y;
-        }
-    }
-}
-
 /// How an element's coefficients move rigidly.
 #[derive(Clone, Copy, Debug)]
 pub enum RigidModes<'a> {
@@ -136,39 +101,185 @@ impl RigidModes<'_> {
 }
 
 /// The spectrum estimates of the module docs for the row-major `n x n`
-/// stiffness `k_e` (`n = 3 k`, `k` the number of positions in `modes`);
-/// `scratch` holds at least [`spectrum_scratch_len`] values.
-pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes, scratch: &mut [f64]) -> Spectrum {
+/// stiffness `k_e` (`n = 3 k`, `k` the number of positions in `modes`).
+pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes) -> Spectrum {
+    let mut out = [Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }];
+    stiffness_spectra(k_e, modes, &mut out);
+    out[0]
+}
+
+/// [`stiffness_spectrum`] of `out.len()` elements of one size: `k_e` holds
+/// their row-major `n x n` matrices one after another, `modes` their `k`
+/// positions each (`n = 3 k`).
+pub fn stiffness_spectra(k_e: &[f64], modes: RigidModes, out: &mut [Spectrum]) {
+    let elements = out.len();
+    if elements == 0 {
+        return;
+    }
     let positions = modes.positions();
+    let k = positions.len() / elements;
+    assert_eq!(positions.len(), k * elements, "the same number of positions per element");
+    assert_eq!(k_e.len(), elements * 9 * k * k, "K_e must be 3k x 3k");
     let modal = matches!(modes, RigidModes::Modal(_));
-    let n = 3 * positions.len();
-    assert_eq!(k_e.len(), n * n, "K_e must be 3k x 3k");
-    assert!(scratch.len() >= spectrum_scratch_len(positions.len()), "scratch too small");
-    let (a, rest) = scratch.split_at_mut(n * n);
+    crate::lanes::dispatch(Spectra { k_e, positions, modal, out });
+}
+
+/// The dispatched body of [`stiffness_spectra`].
+struct Spectra<'a> {
+    k_e: &'a [f64],
+    positions: &'a [[f64; 3]],
+    modal: bool,
+    out: &'a mut [Spectrum],
+}
+
+impl pulp::WithSimd for Spectra<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let width = Lanes::<S>::WIDTH;
+        let Spectra { k_e, positions, modal, out } = self;
+        let k = positions.len() / out.len();
+        let n = 3 * k;
+        let zero = Lanes::splat(simd, 0.0);
+        let (mut matrix, mut x) = (vec![zero; n * n], vec![[zero; 3]; k]);
+        let mut work = vec![zero; work_len(n)];
+        let mut lane = [0.0f64; 16];
+        for (group, out) in out.chunks_mut(width).enumerate() {
+            // lane l holds element `first + l`; lanes past the last element
+            // repeat it (their results are not read)
+            let (first, last) = (group * width, out.len() - 1);
+            let element = |l: usize| first + l.min(last);
+            for (e, m) in matrix.iter_mut().enumerate() {
+                (0..width).for_each(|l| lane[l] = k_e[element(l) * n * n + e]);
+                *m = Lanes::load(simd, &lane[..width]);
+            }
+            for (a, xa) in x.iter_mut().enumerate() {
+                for (i, xi) in xa.iter_mut().enumerate() {
+                    (0..width).for_each(|l| lane[l] = positions[element(l) * k + a][i]);
+                    *xi = Lanes::load(simd, &lane[..width]);
+                }
+            }
+            let [lambda_max, lambda_7, rigid_residual] = estimate(&matrix, &x, modal, &mut work);
+            let mut values = [[0.0f64; 16]; 3];
+            for (v, lanes) in values.iter_mut().zip([lambda_max, lambda_7, rigid_residual]) {
+                lanes.store(&mut v[..width]);
+            }
+            for (l, s) in out.iter_mut().enumerate() {
+                *s = Spectrum { lambda_max: values[0][l], lambda_7: values[1][l], rigid_residual: values[2][l] };
+            }
+        }
+    }
+}
+
+/// Values of work space [`estimate`] needs for an `n x n` matrix.
+fn work_len(n: usize) -> usize {
+    n * n + 10 * n
+}
+
+/// `Σ a_i b_i` in index order.
+#[inline(always)]
+fn dot<R: Real>(a: &[R], b: &[R]) -> R {
+    let mut s = a[0] * b[0];
+    for (x, y) in a[1..].iter().zip(&b[1..]) {
+        s = s + *x * *y;
+    }
+    s
+}
+
+/// `y = K x` for a dense row-major `n x n` matrix.
+#[inline(always)]
+fn mat_vec<R: Real>(k: &[R], x: &[R], y: &mut [R]) {
+    let n = x.len();
+    for (yr, row) in y.iter_mut().zip(k.chunks_exact(n)) {
+        *yr = dot(row, x);
+    }
+}
+
+/// 1 where `a < b`, else 0 (a lane mask as numbers: `and` is a product).
+#[inline(always)]
+fn less<R: Real>(a: R, b: R) -> R {
+    a.select_less(b, a.constant(1.0), a.constant(0.0))
+}
+
+/// `x` where `mask` is 1, else `y`.
+#[inline(always)]
+fn blend<R: Real>(mask: R, x: R, y: R) -> R {
+    mask.constant(0.0).select_less(mask, x, y)
+}
+
+/// `v / |v|` where `|v| > 0`, else `v`, into `out`; returns `|v|`.
+#[inline(always)]
+fn unit_into<R: Real>(v: &[R], out: &mut [R]) -> R {
+    let len = dot(v, v).sqrt();
+    let positive = less(len.constant(0.0), len);
+    for (o, &x) in out.iter_mut().zip(v) {
+        *o = blend(positive, x / len, x);
+    }
+    len
+}
+
+/// Scales `v` to unit length where it is not zero.
+#[inline(always)]
+fn normalise<R: Real>(v: &mut [R]) {
+    let len = dot(v, v).sqrt();
+    let positive = less(len.constant(0.0), len);
+    v.iter_mut().for_each(|x| *x = blend(positive, *x / len, *x));
+}
+
+/// A fixed, deterministic start vector with no special structure.
+#[inline(always)]
+fn start_vector<R: Real>(v: &mut [R]) {
+    for (i, x) in v.iter_mut().enumerate() {
+        *x = x.constant(1.0 + 0.5 * ((i * 7919) % 13) as f64 / 13.0 - 0.25 * (i % 3) as f64);
+    }
+}
+
+/// Removes from `v` its components along the `q` columns (orthonormal).
+#[inline(always)]
+fn project_out<R: Real>(v: &mut [R], q: &[R], n: usize) {
+    for m in q.chunks_exact(n) {
+        let s = dot(v, m);
+        for (x, y) in v.iter_mut().zip(m) {
+            *x = *x - s * *y;
+        }
+    }
+}
+
+/// The estimates `[λ_max, λ₇, rigid residual]` of the module docs for the
+/// row-major `n x n` matrix `k_e` with nodes (or identity coefficients)
+/// `x`, every lane its own element; `work` holds [`work_len`] values, the
+/// orthonormal rigid modes `Q` from value `n²` on.
+#[inline(always)]
+fn estimate<R: Real>(k_e: &[R], x: &[[R; 3]], modal: bool, work: &mut [R]) -> [R; 3] {
+    let n = 3 * x.len();
+    let (zero, one) = (k_e[0].constant(0.0), k_e[0].constant(1.0));
+    let (a, rest) = work.split_at_mut(n * n);
     let (q, rest) = rest.split_at_mut(6 * n);
     let (v, rest) = rest.split_at_mut(n);
     let (w, rest) = rest.split_at_mut(n);
-    let y = &mut rest[..n];
-    // 1. rigid modes, orthonormalised
-    let k = positions.len();
-    // rotations about the nodes' mean (nodal) or the origin (modal: the
-    // coefficients do not sum to a field, so no shift is a rigid motion)
-    let mut c = [0.0; 3];
+    let (y, rest) = rest.split_at_mut(n);
+    let inverse_diagonal = &mut rest[..n];
+    // 1. rigid modes, orthonormalised: rotations about the nodes' mean
+    // (nodal) or the origin (modal: the coefficients do not sum to a field,
+    // so no shift is a rigid motion)
+    let mut c = [zero; 3];
     if !modal {
-        for p in positions {
-            (0..3).for_each(|i| c[i] += p[i] / k as f64);
+        let count = zero.constant(x.len() as f64);
+        for p in x {
+            (0..3).for_each(|i| c[i] = c[i] + p[i] / count);
         }
     }
     for (m, mode) in q.chunks_exact_mut(n).enumerate() {
-        for (node, p) in positions.iter().enumerate() {
+        for (node, p) in x.iter().enumerate() {
             let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
             let value = match m {
-                0..=2 if modal => std::array::from_fn(|i| f64::from(i == m && node == 0)),
-                0..=2 => std::array::from_fn(|i| f64::from(i == m)),
+                0..=2 if modal => std::array::from_fn(|i| if i == m && node == 0 { one } else { zero }),
+                0..=2 => std::array::from_fn(|i| if i == m { one } else { zero }),
                 // e_i × d
-                3 => [0.0, -d[2], d[1]],
-                4 => [d[2], 0.0, -d[0]],
-                _ => [-d[1], d[0], 0.0],
+                3 => [zero, -d[2], d[1]],
+                4 => [d[2], zero, -d[0]],
+                _ => [-d[1], d[0], zero],
             };
             mode[3 * node..3 * node + 3].copy_from_slice(&value);
         }
@@ -179,98 +290,117 @@ pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes, scratch: &mut [f64]) -
         project_out(mode, done, n);
         normalise(mode);
     }
-    // 2. λ_max by power iteration
+    // 2. λ_max by power iteration; a lane stops once its estimate settles
+    // (or its vector vanishes)
     start_vector(v);
     normalise(v);
-    let mut lambda_max = 0.0;
+    let settled = |now: R, before: R| one - less(zero.constant(SETTLED) * now, (now - before).abs());
+    let (mut lambda_max, mut active) = (zero, one);
     for _ in 0..POWER_STEPS {
-        mat_vec(k_e, v, w);
-        let previous = lambda_max;
-        lambda_max = dot(v, w);
-        v.copy_from_slice(w);
-        if normalise(v) == 0.0 || (lambda_max - previous).abs() <= SETTLED * lambda_max {
+        if active.max_lane() == 0.0 {
             break;
         }
+        mat_vec(k_e, v, w);
+        let now = dot(v, w);
+        let len = unit_into(w, y);
+        for (vi, &yi) in v.iter_mut().zip(y.iter()) {
+            *vi = blend(active, yi, *vi);
+        }
+        let stop = (one - less(zero, len)).max(settled(now, lambda_max));
+        lambda_max = blend(active, now, lambda_max);
+        active = active * (one - stop);
     }
-    if lambda_max.is_nan() || lambda_max <= 0.0 || !lambda_max.is_finite() {
-        return Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: f64::INFINITY };
-    }
-    let mut rigid_residual: f64 = 0.0;
+    // (a lane whose λ_max is not a positive number reports nothing else;
+    // it continues on 1 so that the others' arithmetic stays finite)
+    let sound = less(zero, lambda_max) * less(lambda_max, zero.constant(f64::INFINITY));
+    let scale = blend(sound, lambda_max, one);
+    let mut rigid_residual = zero;
     for mode in q.chunks_exact(n) {
         mat_vec(k_e, mode, w);
-        rigid_residual = rigid_residual.max(dot(w, w).sqrt() / lambda_max);
+        rigid_residual = rigid_residual.max(dot(w, w).sqrt() / scale);
     }
     // 3. A = K + λ_max Q Qᵀ, its Cholesky factor (lower, in place), then
     // inverse iteration for its smallest eigenvalue
     a.copy_from_slice(k_e);
     for mode in q.chunks_exact(n) {
         for r in 0..n {
+            let lr = scale * mode[r];
             for s in 0..n {
-                a[r * n + s] += lambda_max * mode[r] * mode[s];
+                a[r * n + s] = a[r * n + s] + lr * mode[s];
             }
         }
     }
     // L in the lower triangle, column by column, each column then taken
-    // out of the trailing rows (every update a contiguous run of a row,
-    // no sum waiting on another); each column is mirrored into the upper
-    // triangle (rows of Lᵀ) for those updates and the solves; `w` takes
-    // the inverse diagonal
+    // out of the trailing rows (every update a contiguous run of a row);
+    // each column is mirrored into the upper triangle (rows of Lᵀ) for
+    // those updates and the solves. A lane whose pivot is not positive has
+    // no factor (K has a negative eigenvalue or a seventh null mode): it
+    // continues on a unit pivot
+    let mut definite = one;
     for j in 0..n {
         let d = a[j * n + j];
-        if d.is_nan() || d <= 0.0 {
-            return Spectrum { lambda_max, lambda_7: 0.0, rigid_residual };
-        }
-        let d = d.sqrt();
+        let positive = less(zero, d);
+        definite = definite * positive;
+        let d = blend(positive, d, one).sqrt();
         a[j * n + j] = d;
-        w[j] = 1.0 / d;
+        inverse_diagonal[j] = one / d;
         for i in j + 1..n {
-            let l = a[i * n + j] * w[j];
+            let l = a[i * n + j] * inverse_diagonal[j];
             a[i * n + j] = l;
             a[j * n + i] = l;
         }
         for i in j + 1..n {
             let (above, row) = a.split_at_mut(i * n);
             let (li, column) = (row[j], &above[j * n + j + 1..j * n + i + 1]);
-            row[j + 1..i + 1].iter_mut().zip(column).for_each(|(x, l)| *x -= li * l);
+            row[j + 1..i + 1].iter_mut().zip(column).for_each(|(x, &l)| *x = *x - li * l);
         }
     }
     start_vector(v);
     project_out(v, q, n);
     normalise(v);
-    let mut inverse = 0.0;
+    let (mut inverse, mut active) = (zero, one);
     for _ in 0..INVERSE_STEPS {
+        if active.max_lane() == 0.0 {
+            break;
+        }
         // y = (L Lᵀ)⁻¹ v, column by column: each unknown, once known,
         // updates the rest (no sum waits on the one before)
         y.copy_from_slice(v);
         for j in 0..n {
-            y[j] *= w[j];
+            y[j] = y[j] * inverse_diagonal[j];
             let (head, tail) = y.split_at_mut(j + 1);
             let yj = head[j];
-            tail.iter_mut().zip(&a[j * n + j + 1..(j + 1) * n]).for_each(|(t, l)| *t -= yj * l);
+            tail.iter_mut().zip(&a[j * n + j + 1..(j + 1) * n]).for_each(|(t, &l)| *t = *t - yj * l);
         }
         for j in (0..n).rev() {
-            y[j] *= w[j];
+            y[j] = y[j] * inverse_diagonal[j];
             let (head, tail) = y.split_at_mut(j);
             let yj = tail[0];
-            head.iter_mut().zip(&a[j * n..j * n + j]).for_each(|(t, l)| *t -= yj * l);
+            head.iter_mut().zip(&a[j * n..j * n + j]).for_each(|(t, &l)| *t = *t - yj * l);
         }
-        // vᵀ A⁻¹ v rises to 1 / λ₇; stop once it has settled
+        // vᵀ A⁻¹ v rises to 1 / λ₇; a lane stops once it has settled
         let estimate = dot(v, y);
-        v.copy_from_slice(y);
-        normalise(v);
-        if (estimate - inverse).abs() <= SETTLED * estimate {
-            break;
+        unit_into(y, w);
+        for (vi, &wi) in v.iter_mut().zip(w.iter()) {
+            *vi = blend(active, wi, *vi);
         }
-        inverse = estimate;
+        let stop = settled(estimate, inverse);
+        inverse = blend(active, estimate, inverse);
+        active = active * (one - stop);
     }
     // Rayleigh quotient of A = K + λ_max Q Qᵀ
     mat_vec(k_e, v, w);
     let mut lambda_7 = dot(v, w);
     for mode in q.chunks_exact(n) {
         let s = dot(v, mode);
-        lambda_7 += lambda_max * s * s;
+        lambda_7 = lambda_7 + scale * s * s;
     }
-    Spectrum { lambda_max, lambda_7: lambda_7.max(0.0), rigid_residual }
+    let lambda_7 = blend(definite, lambda_7.max(zero), zero);
+    [
+        blend(sound, lambda_max, zero),
+        blend(sound, lambda_7, zero),
+        blend(sound, rigid_residual, zero.constant(f64::INFINITY)),
+    ]
 }
 
 /// The exact spectrum measures of a linear tetrahedron with shape function
@@ -375,11 +505,10 @@ mod tests {
     /// orthonormal complement, for checking the estimates.
     fn synthetic(positions: &[[f64; 3]], values: &[f64]) -> Vec<f64> {
         let n = 3 * positions.len();
-        let mut scratch = vec![0.0; spectrum_scratch_len(positions.len())];
         // reuse the kernel's rigid modes by running it on a zero matrix
-        let zero = vec![0.0; n * n];
-        let _ = stiffness_spectrum(&zero, RigidModes::Nodal(positions), &mut scratch);
-        let mut basis: Vec<Vec<f64>> = scratch[n * n..n * n + 6 * n].chunks(n).map(|c| c.to_vec()).collect();
+        let mut work = vec![0.0; work_len(n)];
+        let _ = estimate(&vec![0.0; n * n], positions, false, &mut work);
+        let mut basis: Vec<Vec<f64>> = work[n * n..n * n + 6 * n].chunks(n).map(|c| c.to_vec()).collect();
         let mut seed = 12345u64;
         while basis.len() < n {
             let mut v: Vec<f64> = (0..n)
@@ -417,8 +546,7 @@ mod tests {
         // 18 values from 1e-3 to 7 (a gap at the bottom)
         let values: Vec<f64> = (0..n - 6).map(|i| if i == 0 { 1e-3 } else { 0.5 + 0.36 * i as f64 }).collect();
         let k = synthetic(&x, &values);
-        let mut scratch = vec![0.0; spectrum_scratch_len(8)];
-        let s = stiffness_spectrum(&k, RigidModes::Nodal(&x), &mut scratch);
+        let s = stiffness_spectrum(&k, RigidModes::Nodal(&x));
         let top = values.iter().cloned().fold(0.0, f64::max);
         // power iteration: from below, within a few percent for this evenly
         // spread top of the spectrum (ratio 0.95 between neighbours)
@@ -432,11 +560,10 @@ mod tests {
         let x = cube_corners();
         let mut values: Vec<f64> = (0..18).map(|i| 1.0 + i as f64).collect();
         values[3] = 0.0;
-        let mut scratch = vec![0.0; spectrum_scratch_len(8)];
-        let s = stiffness_spectrum(&synthetic(&x, &values), RigidModes::Nodal(&x), &mut scratch);
+        let s = stiffness_spectrum(&synthetic(&x, &values), RigidModes::Nodal(&x));
         assert!(s.ratio() < 1e-12, "{s:?}");
         values[3] = -0.5;
-        let s = stiffness_spectrum(&synthetic(&x, &values), RigidModes::Nodal(&x), &mut scratch);
+        let s = stiffness_spectrum(&synthetic(&x, &values), RigidModes::Nodal(&x));
         assert_eq!(s.lambda_7, 0.0, "{s:?}");
     }
 
@@ -449,8 +576,7 @@ mod tests {
         for d in 0..3 {
             k[d * n + d] += 5.0;
         }
-        let mut scratch = vec![0.0; spectrum_scratch_len(8)];
-        let s = stiffness_spectrum(&k, RigidModes::Nodal(&x), &mut scratch);
+        let s = stiffness_spectrum(&k, RigidModes::Nodal(&x));
         // |K t_x| = 5 / sqrt(8) against λ_max ≈ 19
         assert!(s.rigid_residual > 0.05, "{s:?}");
     }
@@ -472,8 +598,7 @@ mod tests {
                 }
             }
         }
-        let mut scratch = vec![0.0; spectrum_scratch_len(4)];
-        let general = stiffness_spectrum(&ke, RigidModes::Nodal(&x), &mut scratch);
+        let general = stiffness_spectrum(&ke, RigidModes::Nodal(&x));
         let exact = tet_spectrum(&x, &g, volume, lambda, mu);
         // inverse iteration estimates λ₇ from above, within a few percent
         // where the next eigenvalues lie close (here within 2 %)
@@ -482,5 +607,65 @@ mod tests {
         // power iteration approaches λ_max from below (up to rounding)
         assert!(general.lambda_max <= exact.lambda_max * (1.0 + 1e-12) && general.lambda_max > 0.95 * exact.lambda_max);
         assert!(exact.rigid_residual < 1e-14 && general.rigid_residual < 1e-12);
+    }
+
+    /// Matrices of one size with every outcome: sound (settling after
+    /// different numbers of steps), a seventh null mode, a negative
+    /// eigenvalue, a rigid mode resisted, zero, NaN.
+    fn assorted(x: &[[f64; 3]]) -> Vec<Vec<f64>> {
+        let n = 3 * x.len();
+        let mut out = Vec::new();
+        for spread in [0.05, 0.36, 2.0] {
+            let values: Vec<f64> = (0..n - 6).map(|i| if i == 0 { 1e-3 } else { 0.5 + spread * i as f64 }).collect();
+            out.push(synthetic(x, &values));
+        }
+        let mut values: Vec<f64> = (0..n - 6).map(|i| 1.0 + i as f64).collect();
+        values[3] = 0.0;
+        out.push(synthetic(x, &values));
+        values[3] = -0.5;
+        out.push(synthetic(x, &values));
+        let mut grounded = synthetic(x, &(0..n - 6).map(|i| 1.0 + i as f64).collect::<Vec<_>>());
+        grounded[0] += 5.0;
+        out.push(grounded);
+        out.push(vec![0.0; n * n]);
+        out.push(vec![f64::NAN; n * n]);
+        out
+    }
+
+    #[test]
+    fn every_lane_gives_the_scalar_estimates_at_every_level() {
+        let x = cube_corners();
+        let n = 3 * x.len();
+        let matrices = assorted(&x);
+        // the scalar reference, one element at a time
+        let reference: Vec<[u64; 3]> = matrices
+            .iter()
+            .map(|k| {
+                let mut work = vec![0.0; work_len(n)];
+                estimate(k, &x, false, &mut work).map(f64::to_bits)
+            })
+            .collect();
+        // every level, the elements side by side in every rotation (so
+        // each sits in every lane, beside every other)
+        for level in crate::lanes::levels::available("spectrum lanes") {
+            for shift in 0..matrices.len() {
+                let order: Vec<usize> = (0..matrices.len()).map(|i| (i + shift) % matrices.len()).collect();
+                let k_e: Vec<f64> = order.iter().flat_map(|&i| matrices[i].iter().copied()).collect();
+                let positions: Vec<[f64; 3]> = order.iter().flat_map(|_| x.iter().copied()).collect();
+                let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; order.len()];
+                let op = Spectra { k_e: &k_e, positions: &positions, modal: false, out: &mut out };
+                crate::lanes::levels::run(level, op);
+                for (s, &i) in out.iter().zip(&order) {
+                    let got = [s.lambda_max, s.lambda_7, s.rigid_residual].map(f64::to_bits);
+                    assert_eq!(got, reference[i], "{level:?}, matrix {i}: {s:?}");
+                }
+            }
+        }
+        // and the outcomes are the ones each matrix was made for
+        let s: Vec<Spectrum> = matrices.iter().map(|k| stiffness_spectrum(k, RigidModes::Nodal(&x))).collect();
+        assert!(s[..3].iter().all(|s| (s.lambda_7 - 1e-3).abs() < 1e-9 && s.rigid_residual < 1e-12), "{s:?}");
+        assert!(s[3].ratio() < 1e-12 && s[4].lambda_7 == 0.0 && s[5].rigid_residual > 0.05, "{s:?}");
+        let unsound = Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: f64::INFINITY };
+        assert_eq!((s[6], s[7]), (unsound, unsound));
     }
 }

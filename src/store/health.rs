@@ -13,7 +13,7 @@
 //! for the other elements (a few microseconds), so the check stays on. A
 //! failure is an error naming the element.
 
-use cleave_kernels::spectrum::{spectrum_scratch_len, stiffness_spectrum, tet_spectrum, RigidModes};
+use cleave_kernels::spectrum::{stiffness_spectra, tet_spectrum, RigidModes, Spectrum};
 use rayon::prelude::*;
 
 use super::{BasisError, Batch, ElementKind};
@@ -65,42 +65,28 @@ impl HealthFloors {
 /// failure, names the entry with the smallest element id among the failing
 /// ones (so the error does not depend on the thread count).
 pub(super) fn check(batch: &mut Batch, floors: &HealthFloors) -> Result<(), BasisError> {
-    let (k, n) = (batch.k, 3 * batch.k);
+    let spectra = spectra(batch);
+    let k = batch.k;
     let ratios: Vec<Result<f64, BasisError>> = (0..batch.len())
         .into_par_iter()
-        .map_init(
-            || (vec![0.0; n * n], vec![0.0; spectrum_scratch_len(k)]),
-            |(ke, scratch), i| {
-                let element = batch.elements[i] as usize;
-                let share = &batch.mass_fraction[i * k..(i + 1) * k];
-                if let Some(a) = (0..k).find(|&a| !(share[a] * k as f64 >= floors.mass_fraction)) {
-                    let node = batch.nodes[i * k + a] as usize;
-                    let fraction = share[a] * k as f64;
-                    return Err(BasisError::LightNode { element, node, fraction, floor: floors.mass_fraction });
-                }
-                let x = &batch.rest[i * k..(i + 1) * k];
-                let s = if batch.is_tet() {
-                    // closed form: the nonzero spectrum of a 6 x 6 matrix
-                    let g = &batch.stress_grads[i * 4..i * 4 + 4];
-                    let (x, g) = ([x[0], x[1], x[2], x[3]], [g[0], g[1], g[2], g[3]]);
-                    tet_spectrum(&x, &g, batch.volume[i], batch.lame.0, batch.lame.1)
-                } else {
-                    batch.element_matrix_into(i, ke);
-                    // a polynomial basis moves rigidly by its first (constant)
-                    // coefficient and the identity's coefficients
-                    let modes = if batch.kind == ElementKind::Dg { RigidModes::Modal(x) } else { RigidModes::Nodal(x) };
-                    stiffness_spectrum(ke, modes, scratch)
-                };
-                if !(s.rigid_residual <= floors.rigid_residual) {
-                    return Err(BasisError::RigidModes { element, residual: s.rigid_residual });
-                }
-                let ratio = s.ratio();
-                if !(ratio >= floors.stiffness_ratio) {
-                    return Err(BasisError::SoftElement { element, ratio, floor: floors.stiffness_ratio });
-                }
-                Ok(ratio)
-            },
-        )
+        .map(|i| {
+            let element = batch.elements[i] as usize;
+            let share = &batch.mass_fraction[i * k..(i + 1) * k];
+            if let Some(a) = (0..k).find(|&a| !(share[a] * k as f64 >= floors.mass_fraction)) {
+                let node = batch.nodes[i * k + a] as usize;
+                let fraction = share[a] * k as f64;
+                return Err(BasisError::LightNode { element, node, fraction, floor: floors.mass_fraction });
+            }
+            let s = spectra[i];
+            if !(s.rigid_residual <= floors.rigid_residual) {
+                return Err(BasisError::RigidModes { element, residual: s.rigid_residual });
+            }
+            let ratio = s.ratio();
+            if !(ratio >= floors.stiffness_ratio) {
+                return Err(BasisError::SoftElement { element, ratio, floor: floors.stiffness_ratio });
+            }
+            Ok(ratio)
+        })
         .collect();
     let mut worst: Option<BasisError> = None;
     let mut stored = Vec::with_capacity(ratios.len());
@@ -118,4 +104,38 @@ pub(super) fn check(batch: &mut Batch, floors: &HealthFloors) -> Result<(), Basi
     }
     batch.stiffness_ratio = stored;
     worst.map_or(Ok(()), Err)
+}
+
+/// Elements whose spectra one task estimates together (a few SIMD lane
+/// widths: the matrices gathered for them stay in cache).
+const SPECTRUM_RUN: usize = 32;
+
+/// The spectrum of every entry of `batch`: closed form for tetrahedra,
+/// else estimated from its `K_e`, runs of entries side by side in SIMD
+/// lanes (each entry's estimate the same whichever run holds it).
+fn spectra(batch: &Batch) -> Vec<Spectrum> {
+    let (k, n) = (batch.k, 3 * batch.k);
+    let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; batch.len()];
+    if batch.is_tet() {
+        out.par_iter_mut().enumerate().for_each(|(i, s)| {
+            let (x, g) = (&batch.rest[i * 4..i * 4 + 4], &batch.stress_grads[i * 4..i * 4 + 4]);
+            let (x, g) = ([x[0], x[1], x[2], x[3]], [g[0], g[1], g[2], g[3]]);
+            // the nonzero spectrum of a 6 x 6 matrix
+            *s = tet_spectrum(&x, &g, batch.volume[i], batch.lame.0, batch.lame.1);
+        });
+        return out;
+    }
+    out.par_chunks_mut(SPECTRUM_RUN).enumerate().for_each_init(Vec::new, |ke, (run, out)| {
+        let first = run * SPECTRUM_RUN;
+        ke.resize(out.len() * n * n, 0.0);
+        for (i, m) in ke.chunks_exact_mut(n * n).enumerate() {
+            batch.element_matrix_into(first + i, m);
+        }
+        let x = &batch.rest[first * k..(first + out.len()) * k];
+        // a polynomial basis moves rigidly by its first (constant)
+        // coefficient and the identity's coefficients
+        let modes = if batch.kind == ElementKind::Dg { RigidModes::Modal(x) } else { RigidModes::Nodal(x) };
+        stiffness_spectra(ke, modes, out);
+    });
+    out
 }
