@@ -414,76 +414,161 @@ fn estimate<R: Real>(k_e: &[R], x: &[[R; 3]], modal: bool, work: &mut [R]) -> [R
 /// modes exactly when the gradients sum to zero and reproduce the identity
 /// (`Σ g_a = 0`, `Σ x_a ⊗ g_a = I`), which `rigid_residual` measures.
 pub fn tet_spectrum(x: &[[f64; 3]; 4], g: &[[f64; 3]; 4], volume: f64, lambda: f64, mu: f64) -> Spectrum {
+    let [lambda_max, lambda_7, rigid_residual] = tet_estimate(x, g, volume, lambda, mu);
+    Spectrum { lambda_max, lambda_7, rigid_residual }
+}
+
+/// [`tet_spectrum`] of `out.len()` tetrahedra of one material, side by
+/// side in SIMD lanes (the same bits as one at a time): `x` and `g` hold
+/// four nodes and gradients per tetrahedron, `volume` one value.
+pub fn tet_spectra(x: &[[f64; 3]], g: &[[f64; 3]], volume: &[f64], lambda: f64, mu: f64, out: &mut [Spectrum]) {
+    let tets = out.len();
+    assert!(x.len() == 4 * tets && g.len() == 4 * tets && volume.len() == tets, "four nodes and one volume per tet");
+    crate::lanes::dispatch(TetSpectra { x, g, volume, lame: (lambda, mu), out });
+}
+
+/// The dispatched body of [`tet_spectra`].
+struct TetSpectra<'a> {
+    x: &'a [[f64; 3]],
+    g: &'a [[f64; 3]],
+    volume: &'a [f64],
+    lame: (f64, f64),
+    out: &'a mut [Spectrum],
+}
+
+impl pulp::WithSimd for TetSpectra<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let width = Lanes::<S>::WIDTH;
+        let TetSpectra { x, g, volume, lame, out } = self;
+        let mut lane = [0.0f64; 16];
+        for (group, out) in out.chunks_mut(width).enumerate() {
+            // lanes past the last tetrahedron repeat it (not read)
+            let (first, last) = (group * width, out.len() - 1);
+            let tet = |l: usize| first + l.min(last);
+            let mut load = |value: &dyn Fn(usize) -> f64| {
+                (0..width).for_each(|l| lane[l] = value(tet(l)));
+                Lanes::load(simd, &lane[..width])
+            };
+            let xs: [[Lanes<S>; 3]; 4] = std::array::from_fn(|a| std::array::from_fn(|i| load(&|t| x[4 * t + a][i])));
+            let gs: [[Lanes<S>; 3]; 4] = std::array::from_fn(|a| std::array::from_fn(|i| load(&|t| g[4 * t + a][i])));
+            let vs = load(&|t| volume[t]);
+            let estimates = tet_estimate(&xs, &gs, vs, lame.0, lame.1);
+            let mut values = [[0.0f64; 16]; 3];
+            for (v, lanes) in values.iter_mut().zip(estimates) {
+                lanes.store(&mut v[..width]);
+            }
+            for (l, s) in out.iter_mut().enumerate() {
+                *s = Spectrum { lambda_max: values[0][l], lambda_7: values[1][l], rigid_residual: values[2][l] };
+            }
+        }
+    }
+}
+
+/// `[λ_max, λ₇, rigid residual]` of [`tet_spectrum`], every lane its own
+/// tetrahedron.
+#[inline(always)]
+fn tet_estimate<R: Real>(x: &[[R; 3]; 4], g: &[[R; 3]; 4], volume: R, lambda: f64, mu: f64) -> [R; 3] {
+    let zero = volume.constant(0.0);
     // B_a (6 x 3) for gradient g: rows xx, yy, zz, xy, xz, yz
-    let b = |g: [f64; 3]| -> [[f64; 3]; 6] {
-        [[g[0], 0.0, 0.0], [0.0, g[1], 0.0], [0.0, 0.0, g[2]], [g[1], g[0], 0.0], [g[2], 0.0, g[0]], [0.0, g[2], g[1]]]
+    let b = |g: [R; 3]| -> [[R; 3]; 6] {
+        [
+            [g[0], zero, zero],
+            [zero, g[1], zero],
+            [zero, zero, g[2]],
+            [g[1], g[0], zero],
+            [g[2], zero, g[0]],
+            [zero, g[2], g[1]],
+        ]
     };
-    let mut bbt = [[0.0; 6]; 6];
+    let mut bbt = [[zero; 6]; 6];
     for ga in g {
         let ba = b(*ga);
         for r in 0..6 {
             for c in 0..6 {
-                bbt[r][c] += ba[r][0] * ba[c][0] + ba[r][1] * ba[c][1] + ba[r][2] * ba[c][2];
+                bbt[r][c] = bbt[r][c] + (ba[r][0] * ba[c][0] + ba[r][1] * ba[c][1] + ba[r][2] * ba[c][2]);
             }
         }
     }
     // C^½: √(3λ+2μ) on (1,1,1)/√3 and √(2μ) on its complement among the
     // normal strains, √μ on the (engineering) shears
     let (sv, sd, ss) = ((3.0 * lambda + 2.0 * mu).sqrt(), (2.0 * mu).sqrt(), mu.sqrt());
-    let mut half = [[0.0; 6]; 6];
+    let mut half = [[zero; 6]; 6];
     for r in 0..3 {
         for c in 0..3 {
-            half[r][c] = (sv - sd) / 3.0 + if r == c { sd } else { 0.0 };
+            half[r][c] = zero.constant((sv - sd) / 3.0 + if r == c { sd } else { 0.0 });
         }
-        half[3 + r][3 + r] = ss;
+        half[3 + r][3 + r] = zero.constant(ss);
     }
-    let product = |a: &[[f64; 6]; 6], b: &[[f64; 6]; 6]| -> [[f64; 6]; 6] {
-        std::array::from_fn(|r| std::array::from_fn(|c| (0..6).map(|p| a[r][p] * b[p][c]).sum::<f64>()))
+    let product = |a: &[[R; 6]; 6], b: &[[R; 6]; 6]| -> [[R; 6]; 6] {
+        std::array::from_fn(|r| std::array::from_fn(|c| (1..6).fold(a[r][0] * b[0][c], |s, p| s + a[r][p] * b[p][c])))
     };
     let mut m = product(&product(&half, &bbt), &half);
-    m.iter_mut().flatten().for_each(|v| *v *= volume);
+    m.iter_mut().flatten().for_each(|v| *v = *v * volume);
     let values = jacobi_eigenvalues(m);
-    let (lo, hi) = values.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-    let diameter = (0..4)
-        .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
-        .map(|(a, b)| (0..3).map(|i| (x[a][i] - x[b][i]).powi(2)).sum::<f64>().sqrt())
-        .fold(0.0, f64::max);
-    let mut residual: f64 = 0.0;
+    let (lo, hi) = values[1..].iter().fold((values[0], values[0]), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let mut diameter = zero;
+    for a in 0..4 {
+        for b in a + 1..4 {
+            let d = [0, 1, 2].map(|i| x[a][i] - x[b][i]);
+            diameter = diameter.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+        }
+    }
+    let mut residual = zero;
     for i in 0..3 {
         residual = residual.max((g[0][i] + g[1][i] + g[2][i] + g[3][i]).abs() * diameter);
         for j in 0..3 {
             let xg = x[0][i] * g[0][j] + x[1][i] * g[1][j] + x[2][i] * g[2][j] + x[3][i] * g[3][j];
-            residual = residual.max((xg - f64::from(i == j)).abs());
+            let identity = zero.constant(if i == j { 1.0 } else { 0.0 });
+            residual = residual.max((xg - identity).abs());
         }
     }
-    Spectrum { lambda_max: hi, lambda_7: lo.max(0.0), rigid_residual: residual }
+    [hi, lo.max(zero), residual]
+}
+
+/// 1 where `x` is not zero, else 0.
+#[inline(always)]
+fn nonzero<R: Real>(x: R) -> R {
+    let zero = x.constant(0.0);
+    less(x, zero).max(less(zero, x))
 }
 
 /// Eigenvalues of a symmetric 6 x 6 matrix by cyclic Jacobi rotations
 /// (until the off-diagonal part is below `1e-12` of the norm, which by
 /// Weyl's inequality moves no eigenvalue by more than that; at most 30
-/// sweeps).
-fn jacobi_eigenvalues(mut a: [[f64; 6]; 6]) -> [f64; 6] {
-    let norm: f64 = a.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
+/// sweeps). A lane that has converged, or whose pivot is zero, turns by
+/// the identity (`c = 1, s = 0`: no bit changes).
+#[inline(always)]
+fn jacobi_eigenvalues<R: Real>(mut a: [[R; 6]; 6]) -> [R; 6] {
+    let (zero, one) = (a[0][0].constant(0.0), a[0][0].constant(1.0));
+    let norm = a.iter().flatten().fold(zero, |s, &x| s + x * x).sqrt();
     for _ in 0..30 {
-        let off: f64 = (0..6).flat_map(|p| (p + 1..6).map(move |q| (p, q))).map(|(p, q)| a[p][q] * a[p][q]).sum();
-        if off.sqrt() <= 1e-12 * norm {
+        let mut off = zero;
+        for p in 0..6 {
+            for q in p + 1..6 {
+                off = off + a[p][q] * a[p][q];
+            }
+        }
+        let active = less(zero.constant(1e-12) * norm, off.sqrt());
+        if active.max_lane() == 0.0 {
             break;
         }
         for p in 0..6 {
             for q in p + 1..6 {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
+                let turn = active * nonzero(a[p][q]);
+                let theta = (a[q][q] - a[p][p]) / (zero.constant(2.0) * a[p][q]);
+                let sign = theta.select_less(zero, -one, one);
+                let t = sign / (theta.abs() + (theta * theta + one).sqrt());
+                let t = blend(nonzero(theta), t, one);
+                let c = one / (t * t + one).sqrt();
                 let s = t * c;
-                for k in 0..6 {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
+                let (c, s) = (blend(turn, c, one), blend(turn, s, zero));
+                for row in a.iter_mut() {
+                    let (akp, akq) = (row[p], row[q]);
+                    row[p] = c * akp - s * akq;
+                    row[q] = s * akp + c * akq;
                 }
                 for k in 0..6 {
                     let (apk, aqk) = (a[p][k], a[q][k]);
@@ -667,5 +752,58 @@ mod tests {
         assert!(s[3].ratio() < 1e-12 && s[4].lambda_7 == 0.0 && s[5].rigid_residual > 0.05, "{s:?}");
         let unsound = Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: f64::INFINITY };
         assert_eq!((s[6], s[7]), (unsound, unsound));
+    }
+
+    #[test]
+    fn every_lane_gives_the_scalar_tetrahedron_spectrum_at_every_level() {
+        // sound tetrahedra of several shapes, a flat one (zero volume), one
+        // with gradients that do not sum to zero
+        let shapes = [
+            [[0.1, 0.0, 0.2], [1.3, 0.1, 0.0], [0.2, 0.9, -0.1], [0.3, 0.2, 1.1]],
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 0.1, 0.0], [1.0, 0.0, 0.05]],
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.5, 0.5, 0.0]],
+        ];
+        let mut x: Vec<[f64; 3]> = Vec::new();
+        let (mut g, mut volume) = (Vec::new(), Vec::new());
+        for (t, shape) in shapes.iter().enumerate() {
+            let (v, grads) = crate::tet::gradients(shape).unwrap_or((0.0, [[0.0; 3]; 4]));
+            x.extend(shape);
+            g.extend(grads);
+            volume.push(v.abs());
+            if t == 0 {
+                x.extend(shape);
+                g.extend(grads.map(|gi| [gi[0] + 0.1, gi[1], gi[2]]));
+                volume.push(v.abs());
+            }
+        }
+        let tets = volume.len();
+        let (lambda, mu) = crate::elasticity::lame(1e5, 0.3);
+        let reference: Vec<Spectrum> = (0..tets)
+            .map(|t| {
+                let xt = [x[4 * t], x[4 * t + 1], x[4 * t + 2], x[4 * t + 3]];
+                let gt = [g[4 * t], g[4 * t + 1], g[4 * t + 2], g[4 * t + 3]];
+                tet_spectrum(&xt, &gt, volume[t], lambda, mu)
+            })
+            .collect();
+        let bits = |s: &Spectrum| [s.lambda_max, s.lambda_7, s.rigid_residual].map(f64::to_bits);
+        for level in crate::lanes::levels::available("tetrahedron spectrum lanes") {
+            for shift in 0..tets {
+                let order: Vec<usize> = (0..tets).map(|i| (i + shift) % tets).collect();
+                let xs: Vec<[f64; 3]> = order.iter().flat_map(|&t| x[4 * t..4 * t + 4].to_vec()).collect();
+                let gs: Vec<[f64; 3]> = order.iter().flat_map(|&t| g[4 * t..4 * t + 4].to_vec()).collect();
+                let vs: Vec<f64> = order.iter().map(|&t| volume[t]).collect();
+                let mut out = vec![reference[0]; tets];
+                let op = TetSpectra { x: &xs, g: &gs, volume: &vs, lame: (lambda, mu), out: &mut out };
+                crate::lanes::levels::run(level, op);
+                for (s, &t) in out.iter().zip(&order) {
+                    assert_eq!(bits(s), bits(&reference[t]), "{level:?}, tetrahedron {t}: {s:?}");
+                }
+            }
+        }
+        // sound, sound, skewed, flat (no stiffness), and the bad gradients
+        assert!(reference[0].ratio() > 1e-3 && reference[0].rigid_residual < 1e-14, "{:?}", reference[0]);
+        assert!(reference[1].rigid_residual > 0.05, "{:?}", reference[1]);
+        assert!(reference[3].ratio() > 0.0 && reference[4].lambda_max == 0.0, "{:?}", &reference[3..]);
     }
 }

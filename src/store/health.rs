@@ -13,7 +13,7 @@
 //! for the other elements (a few microseconds), so the check stays on. A
 //! failure is an error naming the element.
 
-use cleave_kernels::spectrum::{stiffness_spectra, tet_spectrum, RigidModes, Spectrum};
+use cleave_kernels::spectrum::{stiffness_spectra, tet_spectra, RigidModes, Spectrum};
 use rayon::prelude::*;
 
 use super::{BasisError, Batch, ElementKind};
@@ -60,12 +60,21 @@ impl HealthFloors {
     }
 }
 
-/// Computes `λ₇ / λ_max` of every entry of `batch` into
-/// `batch.stiffness_ratio` and checks every entry against `floors`; on
-/// failure, names the entry with the smallest element id among the failing
-/// ones (so the error does not depend on the thread count).
-pub(super) fn check(batch: &mut Batch, floors: &HealthFloors) -> Result<(), BasisError> {
-    let spectra = spectra(batch);
+/// Computes `λ₇ / λ_max` of every entry of every batch into its
+/// `stiffness_ratio` and checks every entry against `floors`; on failure,
+/// names, in the first batch with a failing entry, the failing entry with
+/// the smallest element id (so the error does not depend on the thread
+/// count).
+pub(super) fn check_all(batches: &mut [Batch], floors: &HealthFloors) -> Result<(), BasisError> {
+    let spectra = spectra(batches);
+    for (batch, spectra) in batches.iter_mut().zip(spectra) {
+        check(batch, &spectra, floors)?;
+    }
+    Ok(())
+}
+
+/// [`check_all`] for one batch whose entries have the `spectra`.
+fn check(batch: &mut Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Result<(), BasisError> {
     let k = batch.k;
     let ratios: Vec<Result<f64, BasisError>> = (0..batch.len())
         .into_par_iter()
@@ -106,36 +115,53 @@ pub(super) fn check(batch: &mut Batch, floors: &HealthFloors) -> Result<(), Basi
     worst.map_or(Ok(()), Err)
 }
 
-/// Elements whose spectra one task estimates together (a few SIMD lane
-/// widths: the matrices gathered for them stay in cache).
+/// Elements whose spectra one task estimates together: a few SIMD lane
+/// widths (the matrices gathered for them stay in cache), more for
+/// tetrahedra (no matrix).
 const SPECTRUM_RUN: usize = 32;
+const TET_RUN: usize = 128;
 
-/// The spectrum of every entry of `batch`: closed form for tetrahedra,
-/// else estimated from its `K_e`, runs of entries side by side in SIMD
-/// lanes (each entry's estimate the same whichever run holds it).
-fn spectra(batch: &Batch) -> Vec<Spectrum> {
-    let (k, n) = (batch.k, 3 * batch.k);
-    let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; batch.len()];
-    if batch.is_tet() {
-        out.par_iter_mut().enumerate().for_each(|(i, s)| {
-            let (x, g) = (&batch.rest[i * 4..i * 4 + 4], &batch.stress_grads[i * 4..i * 4 + 4]);
-            let (x, g) = ([x[0], x[1], x[2], x[3]], [g[0], g[1], g[2], g[3]]);
-            // the nonzero spectrum of a 6 x 6 matrix
-            *s = tet_spectrum(&x, &g, batch.volume[i], batch.lame.0, batch.lame.1);
-        });
-        return out;
+/// The spectrum of every entry of every batch: closed form for
+/// tetrahedra, else estimated from its `K_e`, runs of entries side by side
+/// in SIMD lanes (each entry's estimate the same whichever run holds it),
+/// the runs of all batches in one parallel pass (a cut makes a dozen
+/// batches, most of a few elements).
+fn spectra(batches: &[Batch]) -> Vec<Vec<Spectrum>> {
+    let runs: Vec<(usize, std::ops::Range<usize>)> = batches
+        .iter()
+        .enumerate()
+        .flat_map(|(b, batch)| {
+            let run = if batch.is_tet() { TET_RUN } else { SPECTRUM_RUN };
+            (0..batch.len()).step_by(run).map(move |first| (b, first..(first + run).min(batch.len())))
+        })
+        .collect();
+    let estimates: Vec<Vec<Spectrum>> = runs
+        .par_iter()
+        .map_init(Vec::new, |ke, (b, range)| {
+            let batch = &batches[*b];
+            let (k, n) = (batch.k, 3 * batch.k);
+            let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; range.len()];
+            let x = &batch.rest[range.start * k..range.end * k];
+            if batch.is_tet() {
+                // the nonzero spectrum of a 6 x 6 matrix
+                let (g, volume) = (&batch.stress_grads[range.start * 4..range.end * 4], &batch.volume[range.clone()]);
+                tet_spectra(x, g, volume, batch.lame.0, batch.lame.1, &mut out);
+                return out;
+            }
+            ke.resize(range.len() * n * n, 0.0);
+            for (i, m) in range.clone().zip(ke.chunks_exact_mut(n * n)) {
+                batch.element_matrix_into(i, m);
+            }
+            // a polynomial basis moves rigidly by its first (constant)
+            // coefficient and the identity's coefficients
+            let modes = if batch.kind == ElementKind::Dg { RigidModes::Modal(x) } else { RigidModes::Nodal(x) };
+            stiffness_spectra(ke, modes, &mut out);
+            out
+        })
+        .collect();
+    let mut per_batch: Vec<Vec<Spectrum>> = batches.iter().map(|b| Vec::with_capacity(b.len())).collect();
+    for ((b, _), run) in runs.iter().zip(estimates) {
+        per_batch[*b].extend(run);
     }
-    out.par_chunks_mut(SPECTRUM_RUN).enumerate().for_each_init(Vec::new, |ke, (run, out)| {
-        let first = run * SPECTRUM_RUN;
-        ke.resize(out.len() * n * n, 0.0);
-        for (i, m) in ke.chunks_exact_mut(n * n).enumerate() {
-            batch.element_matrix_into(first + i, m);
-        }
-        let x = &batch.rest[first * k..(first + out.len()) * k];
-        // a polynomial basis moves rigidly by its first (constant)
-        // coefficient and the identity's coefficients
-        let modes = if batch.kind == ElementKind::Dg { RigidModes::Modal(x) } else { RigidModes::Nodal(x) };
-        stiffness_spectra(ke, modes, out);
-    });
-    out
+    per_batch
 }

@@ -565,9 +565,7 @@ impl ElementStore {
             };
             store.batches.push(batch);
         }
-        for batch in &mut store.batches {
-            health::check(batch, &options.health)?;
-        }
+        health::check_all(&mut store.batches, &options.health)?;
         Ok((store, faces_integrated))
     }
 
