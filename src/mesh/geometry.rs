@@ -2,6 +2,7 @@
 //! planarity, folds).
 
 use cleave_kernels::vec3::{add, cross, dot, norm, scale, sub};
+use smallvec::SmallVec;
 
 /// An oriented plane through `point` with normal `normal` (need not be unit).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -64,8 +65,13 @@ pub struct FaceGeometry {
 /// The normal is Newell's area vector, robust for non-convex and slightly
 /// non-planar loops; a loop of zero area gets a zero normal.
 pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
-    let p = |i: usize| nodes[vertices[i % vertices.len()] as usize];
-    let n = vertices.len();
+    loop_geometry(vertices.len(), |i| nodes[vertices[i] as usize])
+}
+
+/// [`face_geometry`] of the loop of the `n` points `point(0)`, ...,
+/// `point(n - 1)`.
+pub fn loop_geometry(n: usize, point: impl Fn(usize) -> [f64; 3]) -> FaceGeometry {
+    let p = |i: usize| point(i % n);
     let mean = scale((0..n).fold([0.0; 3], |acc, i| add(acc, p(i))), 1.0 / n as f64);
     let mut area_vec = [0.0; 3];
     let mut c = [0.0; 3];
@@ -96,36 +102,92 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
     FaceGeometry { normal, area: 0.5 * len, centroid, max_deviation, diameter: d2.sqrt() }
 }
 
+/// Closed loops of keyed points (a key names a point: two loops share an
+/// edge where they hold the same two keys next to each other), one after
+/// another: building them allocates nothing per loop, and cleared they
+/// keep their room.
+#[derive(Clone, Debug)]
+pub struct Loops<K> {
+    points: Vec<(K, [f64; 3])>,
+    ends: Vec<usize>,
+}
+
+impl<K> Default for Loops<K> {
+    fn default() -> Self {
+        Loops { points: Vec::new(), ends: Vec::new() }
+    }
+}
+
+impl<K: Copy> Loops<K> {
+    /// No loops (the room is kept).
+    pub fn clear(&mut self) {
+        self.points.clear();
+        self.ends.clear();
+    }
+
+    /// Appends one loop.
+    pub fn push(&mut self, points: impl IntoIterator<Item = (K, [f64; 3])>) {
+        self.points.extend(points);
+        self.ends.push(self.points.len());
+    }
+
+    /// Reverses the last loop.
+    pub fn reverse_last(&mut self) {
+        let start = if self.ends.len() < 2 { 0 } else { self.ends[self.ends.len() - 2] };
+        self.points[start..].reverse();
+    }
+
+    /// Number of loops.
+    pub fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    /// Whether there are no loops.
+    pub fn is_empty(&self) -> bool {
+        self.ends.is_empty()
+    }
+
+    /// Loop `i`.
+    pub fn get(&self, i: usize) -> &[(K, [f64; 3])] {
+        let start = if i == 0 { 0 } else { self.ends[i - 1] };
+        &self.points[start..self.ends[i]]
+    }
+
+    /// The loops in order.
+    pub fn iter(&self) -> impl Iterator<Item = &[(K, [f64; 3])]> + Clone {
+        (0..self.len()).map(|i| self.get(i))
+    }
+
+    /// Every point of every loop, loop after loop.
+    pub fn points(&self) -> &[(K, [f64; 3])] {
+        &self.points
+    }
+}
+
 /// The depth (m) of the deepest fold of a closed surface given as planar
-/// face loops of `(key, position)` (a key names a point; two loops share
-/// an edge where they hold the same two keys next to each other). At an
-/// edge where faces `f` and `g` meet, the fold's depth is the smaller of
-/// how far `g`'s points lie outside `f`'s plane and how far `f`'s lie
-/// outside `g`'s; both are positive only at a reflex edge, and a closed
-/// surface without reflex edges bounds a convex body. The loops run
-/// counter-clockwise seen from outside. Negative for a strictly convex
-/// surface.
-pub fn fold_depth<K: Copy + Ord>(loops: &[Vec<(K, [f64; 3])>]) -> f64 {
-    let (mut points, mut order) = (Vec::new(), Vec::new());
-    let planes: Vec<([f64; 3], [f64; 3])> = loops
+/// face loops. At an edge where faces `f` and `g` meet, the fold's depth
+/// is the smaller of how far `g`'s points lie outside `f`'s plane and how
+/// far `f`'s lie outside `g`'s; both are positive only at a reflex edge,
+/// and a closed surface without reflex edges bounds a convex body. The
+/// loops run counter-clockwise seen from outside. Negative for a strictly
+/// convex surface.
+pub fn fold_depth<K: Copy + Ord>(loops: &Loops<K>) -> f64 {
+    // (on the stack for the elements cuts make: thousands per cut)
+    let planes: SmallVec<[([f64; 3], [f64; 3]); 16]> = loops
         .iter()
         .map(|lp| {
-            points.clear();
-            points.extend(lp.iter().map(|p| p.1));
-            order.clear();
-            order.extend(0..points.len() as u32);
-            let g = face_geometry(&points, &order);
+            let g = loop_geometry(lp.len(), |i| lp[i].1);
             (g.centroid, g.normal)
         })
         .collect();
     let outside = |f: usize, g: usize| {
         let (c, n) = planes[f];
-        loops[g].iter().map(|p| dot(sub(p.1, c), n)).fold(f64::NEG_INFINITY, f64::max)
+        loops.get(g).iter().map(|p| dot(sub(p.1, c), n)).fold(f64::NEG_INFINITY, f64::max)
     };
     // every loop's edges, sorted: a loop meets the first loop (in loop
     // order) that holds the same edge (a sort, not a hash map: cuts and
     // element builds measure thousands of elements)
-    let mut edges: Vec<((K, K), usize)> = Vec::with_capacity(loops.iter().map(Vec::len).sum());
+    let mut edges: SmallVec<[((K, K), usize); 64]> = SmallVec::with_capacity(loops.points().len());
     for (k, lp) in loops.iter().enumerate() {
         for i in 0..lp.len() {
             let (a, b) = (lp[i].0, lp[(i + 1) % lp.len()].0);

@@ -17,7 +17,7 @@ mod triangulate;
 mod validate;
 
 pub use adjacency::Adjacency;
-pub use geometry::{face_geometry, fold_depth, FaceGeometry, Plane};
+pub use geometry::{face_geometry, fold_depth, loop_geometry, FaceGeometry, Loops, Plane};
 pub use triangulate::triangulate_loop;
 pub use validate::{MeshError, ValidationOptions};
 
@@ -145,7 +145,7 @@ pub(crate) fn diameter(points: &[[f64; 3]]) -> f64 {
 }
 
 /// [`diameter`] of the `n` points `point(0..n)`, without gathering them.
-fn diameter_of(n: usize, point: impl Fn(usize) -> [f64; 3]) -> f64 {
+pub(crate) fn diameter_of(n: usize, point: impl Fn(usize) -> [f64; 3]) -> f64 {
     let mut d2: f64 = 0.0;
     for i in 0..n {
         let a = point(i);
@@ -321,18 +321,15 @@ impl PolyMesh {
     /// diameter, the fold of a cap bent through a snapped node its
     /// distance from the cut plane.
     pub fn non_convexity(&self, e: usize) -> f64 {
-        let loops: Vec<Vec<(u32, [f64; 3])>> = self.elements[e]
-            .faces
-            .iter()
-            .map(|r| {
-                let mut lp: Vec<(u32, [f64; 3])> =
-                    self.faces[r.face as usize].vertices.iter().map(|&v| (v, self.nodes[v as usize])).collect();
-                if !r.outward {
-                    lp.reverse();
-                }
-                lp
-            })
-            .collect();
+        let mut loops = Loops::default();
+        for r in &self.elements[e].faces {
+            let lp = &self.faces[r.face as usize].vertices;
+            let point = |&v: &u32| (v, self.nodes[v as usize]);
+            match r.outward {
+                true => loops.push(lp.iter().map(point)),
+                false => loops.push(lp.iter().rev().map(point)),
+            }
+        }
         fold_depth(&loops) / self.element_diameter(e)
     }
 

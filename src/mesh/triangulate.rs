@@ -8,7 +8,12 @@
 
 use cleave_kernels::vec3::{cross, dot, norm, sub};
 
+use smallvec::SmallVec;
+
 use super::geometry::face_geometry;
+
+/// Loop lengths triangulated without a heap allocation for the work lists.
+const LOCAL: usize = 24;
 
 /// Triangles (in node ids, oriented like the loop) covering the loop.
 pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> Vec<[u32; 3]> {
@@ -26,14 +31,15 @@ pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> Vec<[u32; 3]> {
     };
     let v = cross(normal, u);
     let o = nodes[vertices[0] as usize];
-    let pts: Vec<[f64; 2]> = vertices
+    // (on the stack for the loops cuts make: thousands per cut)
+    let pts: SmallVec<[[f64; 2]; LOCAL]> = vertices
         .iter()
         .map(|&i| {
             let d = sub(nodes[i as usize], o);
             [dot(d, u), dot(d, v)]
         })
         .collect();
-    let mut ring: Vec<usize> = (0..n).collect();
+    let mut ring: SmallVec<[usize; LOCAL]> = (0..n).collect();
     let mut out = Vec::with_capacity(n - 2);
     while ring.len() > 3 {
         let m = ring.len();

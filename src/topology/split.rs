@@ -35,10 +35,11 @@ use rustc_hash::FxHashMap as HashMap;
 
 use cleave_kernels::vec3::{add, cross, dot, lerp, norm, scale, sub};
 use rayon::prelude::*;
+use smallvec::SmallVec;
 use thiserror::Error;
 
 use super::CutScope;
-use crate::mesh::{diameter, fold_depth, quality, Face, FaceRef, Plane, PolyMesh};
+use crate::mesh::{diameter, diameter_of, fold_depth, loop_geometry, quality, Face, FaceRef, Loops, Plane, PolyMesh};
 
 /// Tolerances of a split.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -307,7 +308,9 @@ pub(crate) fn classify(
     // (the trial splits are independent: run in parallel)
     let kept_by_trial: Vec<bool> = both
         .par_iter()
-        .map(|&e| !chosen[e] || protected(e) || !split_is_healthy(mesh, e, &dist, &side, plane, opts))
+        .map_init(TrialParts::default, |parts, &e| {
+            !chosen[e] || protected(e) || !split_is_healthy(mesh, e, &dist, &side, plane, opts, parts)
+        })
         .collect();
     let mut keep = vec![false; mesh.elements.len()];
     both.iter().zip(&kept_by_trial).for_each(|(&e, &k)| keep[e] = k);
@@ -385,6 +388,19 @@ enum Point {
     Edge(u32, u32),
 }
 
+/// The two parts a trial split builds, kept by each thread from one trial
+/// to the next (their room reused).
+#[derive(Default)]
+struct TrialParts {
+    /// The face loops of the positive and the negative part, outward.
+    loops: [Loops<Point>; 2],
+    /// The points where a face meets the plane.
+    on_plane: Vec<[f64; 3]>,
+    /// The cap's positions, and a part's points (each once).
+    cap_positions: Vec<[f64; 3]>,
+    points: Vec<(Point, [f64; 3])>,
+}
+
 /// Whether both parts that splitting element `e` would make are healthy:
 /// no face of `e` lies (partly) in the plane, the cap is one loop, and each
 /// part sees its centroid from every face (the cones of the quadrature),
@@ -392,34 +408,42 @@ enum Point {
 /// `min_spacing` times its diameter and no fold deeper than `snap` times
 /// it. The parts are built from the same points, clipped face
 /// loops and cap pieces as the split itself.
-fn split_is_healthy(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], plane: &Plane, opts: &SplitOptions) -> bool {
+fn split_is_healthy(
+    mesh: &PolyMesh,
+    e: usize,
+    dist: &[f64],
+    side: &[i8],
+    plane: &Plane,
+    opts: &SplitOptions,
+    parts: &mut TrialParts,
+) -> bool {
     let el = &mesh.elements[e];
     let position = |p: Point| match p {
         Point::Node(v) => mesh.nodes[v as usize],
         Point::Edge(a, b) => crossing(&mesh.nodes, dist, a, b).3,
     };
-    let mut loops: [Vec<Vec<Point>>; 2] = [Vec::new(), Vec::new()];
+    let TrialParts { loops, on_plane, cap_positions, points } = parts;
+    loops.iter_mut().for_each(Loops::clear);
     for r in &el.faces {
         let v = &mesh.faces[r.face as usize].vertices;
-        if v.iter().all(|&x| side[x as usize] == 0) || face_partly_on_plane(&mesh.nodes, dist, v, side) {
+        if v.iter().all(|&x| side[x as usize] == 0) || face_partly_on_plane(&mesh.nodes, dist, v, side, on_plane) {
             return false;
         }
-        for (p, sign) in [1i8, -1].into_iter().enumerate() {
-            let mut lp = Vec::with_capacity(v.len() + 1);
-            for i in 0..v.len() {
-                let (a, b) = (v[i], v[(i + 1) % v.len()]);
-                if side[a as usize] * sign >= 0 {
-                    lp.push(Point::Node(a));
-                }
-                if side[a as usize] * side[b as usize] < 0 {
-                    lp.push(Point::Edge(a.min(b), a.max(b)));
-                }
+        for (part, sign) in loops.iter_mut().zip([1i8, -1]) {
+            if !v.iter().any(|&x| side[x as usize] == sign) {
+                continue;
             }
-            if v.iter().any(|&x| side[x as usize] == sign) {
-                if !r.outward {
-                    lp.reverse();
-                }
-                loops[p].push(lp);
+            // the face's points on this part's side, and its crossings
+            let points = (0..v.len()).flat_map(|i| {
+                let (a, b) = (v[i], v[(i + 1) % v.len()]);
+                let node = (side[a as usize] * sign >= 0).then_some(Point::Node(a));
+                let edge = (side[a as usize] * side[b as usize] < 0).then_some(Point::Edge(a.min(b), a.max(b)));
+                node.into_iter().chain(edge)
+            });
+            let keyed = points.map(|p| (p, position(p)));
+            part.push(keyed);
+            if !r.outward {
+                part.reverse_last();
             }
         }
     }
@@ -428,24 +452,20 @@ fn split_is_healthy(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], plane:
     let Some(cap) = cap_loop(&loops[0]) else {
         return false;
     };
-    let cap_positions: Vec<[f64; 3]> = cap.iter().map(|&p| position(p)).collect();
-    for piece in cap_pieces(&cap_positions, plane) {
-        let lp: Vec<Point> = piece.iter().map(|&i| cap[i]).collect();
-        let mut reversed = lp.clone();
-        reversed.reverse();
-        loops[0].push(reversed);
-        loops[1].push(lp);
+    cap_positions.clear();
+    cap_positions.extend(cap.iter().map(|&p| position(p)));
+    for piece in cap_pieces(cap_positions, plane) {
+        loops[0].push(piece.iter().rev().map(|&i| (cap[i], cap_positions[i])));
+        loops[1].push(piece.iter().map(|&i| (cap[i], cap_positions[i])));
     }
     loops.iter().all(|part| {
-        let keyed: Vec<Vec<(Point, [f64; 3])>> =
-            part.iter().map(|lp| lp.iter().map(|&p| (p, position(p))).collect()).collect();
-        let mut points: Vec<Point> = part.iter().flatten().copied().collect();
-        points.sort_unstable();
-        points.dedup();
-        let xs: Vec<[f64; 3]> = points.iter().map(|&p| position(p)).collect();
-        let o = xs[0];
+        points.clear();
+        points.extend_from_slice(part.points());
+        points.sort_unstable_by_key(|p| p.0);
+        points.dedup_by_key(|p| p.0);
+        let o = points[0].1;
         let (mut volume, mut centroid) = (0.0, [0.0; 3]);
-        for lp in &keyed {
+        for lp in part.iter() {
             for i in 1..lp.len().saturating_sub(1) {
                 let (a, b, c) = (lp[0].1, lp[i].1, lp[i + 1].1);
                 let v = cleave_kernels::tet::signed_volume(o, a, b, c);
@@ -454,24 +474,23 @@ fn split_is_healthy(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], plane:
             }
         }
         let centroid = scale(centroid, 1.0 / volume);
-        let d = diameter(&xs);
+        let d = diameter_of(points.len(), |i| points[i].1);
         // the quadrature of a mean value element takes cones from its
         // centroid to its faces: every face must see the centroid inside;
         // and no face may be a sliver of no area (a clipped loop whose
         // points snapping left on one line)
-        let star = keyed.iter().all(|lp| {
-            let pts: Vec<[f64; 3]> = lp.iter().map(|p| p.1).collect();
-            let g = crate::mesh::face_geometry(&pts, &(0..pts.len() as u32).collect::<Vec<_>>());
+        let star = part.iter().all(|lp| {
+            let g = loop_geometry(lp.len(), |i| lp[i].1);
             dot(sub(centroid, g.centroid), g.normal) < 0.0 && g.area > MIN_FACE_AREA * d * d
         });
-        let spacing = (0..xs.len())
-            .flat_map(|i| (i + 1..xs.len()).map(move |j| (i, j)))
-            .map(|(i, j)| norm(sub(xs[i], xs[j])))
+        let spacing = (0..points.len())
+            .flat_map(|i| (i + 1..points.len()).map(move |j| (i, j)))
+            .map(|(i, j)| norm(sub(points[i].1, points[j].1)))
             .fold(f64::INFINITY, f64::min);
         star && quality(volume, d) >= opts.min_quality
             && d >= opts.min_diameter
             && spacing >= opts.min_spacing * d
-            && fold_depth(&keyed) <= (opts.snap + CAP_PLANARITY) * d
+            && fold_depth(part) <= (opts.snap + CAP_PLANARITY) * d
     })
 }
 
@@ -479,9 +498,10 @@ fn split_is_healthy(mesh: &PolyMesh, e: usize, dist: &[f64], side: &[i8], plane:
 /// it, side 0, and the crossings of its edges) are three or more off one
 /// line. An exact plane meets a convex face in a segment, so this happens
 /// only by snapping: that part of the face would become part of the cap,
-/// or both halves of the face would hold the same edge.
-fn face_partly_on_plane(nodes: &[[f64; 3]], dist: &[f64], v: &[u32], side: &[i8]) -> bool {
-    let mut on = Vec::new();
+/// or both halves of the face would hold the same edge. `on` is room for
+/// those points.
+fn face_partly_on_plane(nodes: &[[f64; 3]], dist: &[f64], v: &[u32], side: &[i8], on: &mut Vec<[f64; 3]>) -> bool {
+    on.clear();
     for i in 0..v.len() {
         let (a, b) = (v[i], v[(i + 1) % v.len()]);
         if side[a as usize] == 0 {
@@ -514,29 +534,37 @@ fn face_partly_on_plane(nodes: &[[f64; 3]], dist: &[f64], v: &[u32], side: &[i8]
 /// outward of the negative part (counter-clockwise about the plane's
 /// normal). Built from the faces rather than by sorting points about a
 /// centre, so it holds for a cap bent through snapped nodes. `None` unless
-/// those edges form one simple loop of at least three points.
-fn cap_loop<K: Copy + Eq + std::hash::Hash + Ord>(faces: &[Vec<K>]) -> Option<Vec<K>> {
-    let mut directed: HashMap<(K, K), usize> = HashMap::default();
-    for lp in faces {
+/// those edges form one simple loop of at least three points. (Sorted
+/// lists, not hash maps: a cut builds thousands of caps.)
+fn cap_loop<K: Copy + Ord>(faces: &Loops<K>) -> Option<Vec<K>> {
+    let mut directed: SmallVec<[(K, K); 48]> = SmallVec::with_capacity(faces.points().len());
+    for lp in faces.iter() {
         for i in 0..lp.len() {
-            *directed.entry((lp[i], lp[(i + 1) % lp.len()])).or_insert(0) += 1;
+            directed.push((lp[i].0, lp[(i + 1) % lp.len()].0));
         }
     }
-    let mut next: HashMap<K, K> = HashMap::default();
-    for (&(a, b), &count) in &directed {
-        if count == 1 && !directed.contains_key(&(b, a)) && next.insert(a, b).is_some() {
-            return None;
+    directed.sort_unstable();
+    // the edges held once, whose reverse no face holds, by their first point
+    let mut next: SmallVec<[(K, K); 16]> = SmallVec::new();
+    for uses in directed.chunk_by(|x, y| x == y) {
+        let (a, b) = uses[0];
+        if uses.len() == 1 && directed.binary_search(&(b, a)).is_err() {
+            next.push((a, b));
         }
     }
-    let start = *next.keys().min()?;
+    if next.windows(2).any(|w| w[0].0 == w[1].0) {
+        return None;
+    }
+    let after = |a: K| next.binary_search_by_key(&a, |e| e.0).ok().map(|i| next[i].1);
+    let start = next.first()?.0;
     let mut lp = vec![start];
-    let mut at = next[&start];
+    let mut at = after(start)?;
     while at != start {
         if lp.len() > next.len() {
             return None;
         }
         lp.push(at);
-        at = *next.get(&at)?;
+        at = after(at)?;
     }
     (lp.len() == next.len() && lp.len() >= 3).then_some(lp)
 }
@@ -560,42 +588,46 @@ const CAP_PLANARITY: f64 = 1e-6;
 /// and the others (the ears of snapped nodes) stay triangles. Returns loops
 /// of indices into `points`, oriented like the loop.
 fn cap_pieces(points: &[[f64; 3]], plane: &Plane) -> Vec<Vec<usize>> {
-    let local: Vec<u32> = (0..points.len() as u32).collect();
+    // (the work lists on the stack: a cut builds thousands of caps)
+    let local: SmallVec<[u32; 16]> = (0..points.len() as u32).collect();
     let triangles = crate::mesh::triangulate_loop(points, &local);
     let tolerance = CAP_PLANARITY * diameter(points);
-    let flat: Vec<bool> =
+    let flat: SmallVec<[bool; 16]> =
         triangles.iter().map(|t| t.iter().all(|&i| plane.distance(points[i as usize]).abs() <= tolerance)).collect();
-    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::default();
+    // (each directed edge is one triangle's: a sorted list finds it)
+    let mut by_edge: SmallVec<[((u32, u32), usize); 48]> = SmallVec::with_capacity(3 * triangles.len());
     for (k, t) in triangles.iter().enumerate() {
         for i in 0..3 {
-            by_edge.insert((t[i], t[(i + 1) % 3]), k);
+            by_edge.push(((t[i], t[(i + 1) % 3]), k));
         }
     }
-    let mut done = vec![false; triangles.len()];
+    by_edge.sort_unstable();
+    let triangle_on = |edge: (u32, u32)| by_edge.binary_search_by_key(&edge, |x| x.0).ok().map(|i| by_edge[i].1);
+    let mut done: SmallVec<[bool; 16]> = smallvec::smallvec![false; triangles.len()];
     let mut pieces = Vec::new();
     for start in 0..triangles.len() {
         if done[start] {
             continue;
         }
         done[start] = true;
-        let mut lp: Vec<u32> = triangles[start].to_vec();
+        let mut lp: Vec<usize> = triangles[start].iter().map(|&i| i as usize).collect();
         if flat[start] {
             // grow the loop across its edges into flat neighbours
             let mut i = 0;
             while i < lp.len() {
-                let (a, b) = (lp[i], lp[(i + 1) % lp.len()]);
-                match by_edge.get(&(b, a)) {
-                    Some(&k) if flat[k] && !done[k] => {
+                let (a, b) = (lp[i] as u32, lp[(i + 1) % lp.len()] as u32);
+                match triangle_on((b, a)) {
+                    Some(k) if flat[k] && !done[k] => {
                         done[k] = true;
                         let t = triangles[k];
                         let apex = (0..3).map(|j| t[j]).find(|&v| v != a && v != b).expect("a triangle has 3 corners");
-                        lp.insert(i + 1, apex);
+                        lp.insert(i + 1, apex as usize);
                     }
                     _ => i += 1,
                 }
             }
         }
-        pieces.push(lp.into_iter().map(|i| i as usize).collect());
+        pieces.push(lp);
     }
     pieces
 }
@@ -638,16 +670,19 @@ pub(crate) fn split(
     // 2. split the crossed faces: face -> (positive part, negative part)
     let mut face_parts: HashMap<u32, (u32, u32)> = HashMap::default();
     for &e in &crossed {
-        for r in mesh.elements[e].faces.clone() {
+        for k in 0..mesh.elements[e].faces.len() {
+            let r = mesh.elements[e].faces[k];
             if face_parts.contains_key(&r.face) {
                 continue;
             }
-            let v = mesh.faces[r.face as usize].vertices.clone();
+            let v = &mesh.faces[r.face as usize].vertices;
             let has_pos = v.iter().any(|&x| side[x as usize] > 0);
             let has_neg = v.iter().any(|&x| side[x as usize] < 0);
             if !(has_pos && has_neg) {
                 continue;
             }
+            // (the face's loop is replaced by its positive part below)
+            let v = std::mem::take(&mut mesh.faces[r.face as usize].vertices);
             let (mut pos, mut neg) = (Vec::new(), Vec::new());
             for i in 0..v.len() {
                 let (a, b) = (v[i], v[(i + 1) % v.len()]);
@@ -732,10 +767,11 @@ pub(crate) fn split(
         report.repaired_elements.push(e as u32);
     }
     // 3. split the elements
+    let mut outward = Loops::default();
+    let mut positions: Vec<[f64; 3]> = Vec::new();
     for &e in &crossed {
-        let refs = mesh.elements[e].faces.clone();
         let (mut pos_faces, mut neg_faces) = (Vec::new(), Vec::new());
-        for r in &refs {
+        for r in &mesh.elements[e].faces {
             if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
                 pos_faces.push(FaceRef { face: fp, outward: r.outward });
                 neg_faces.push(FaceRef { face: fneg, outward: r.outward });
@@ -750,18 +786,16 @@ pub(crate) fn split(
                 return Err(SplitError::NonConvexElement { element: e, face: r.face as usize });
             }
         }
-        let outward: Vec<Vec<u32>> = pos_faces
-            .iter()
-            .map(|r| {
-                let mut lp = mesh.faces[r.face as usize].vertices.clone();
-                if !r.outward {
-                    lp.reverse();
-                }
-                lp
-            })
-            .collect();
+        outward.clear();
+        for r in &pos_faces {
+            outward.push(mesh.faces[r.face as usize].vertices.iter().map(|&v| (v, mesh.nodes[v as usize])));
+            if !r.outward {
+                outward.reverse_last();
+            }
+        }
         let cap_points = cap_loop(&outward).ok_or(SplitError::DegenerateCap { element: e })?;
-        let positions: Vec<[f64; 3]> = cap_points.iter().map(|&p| mesh.nodes[p as usize]).collect();
+        positions.clear();
+        positions.extend(cap_points.iter().map(|&p| mesh.nodes[p as usize]));
         // the cap pieces run counter-clockwise about +n: out of the negative part
         for piece in cap_pieces(&positions, plane) {
             let cap = mesh.faces.len() as u32;
