@@ -119,6 +119,11 @@ impl<K> Default for Loops<K> {
 }
 
 impl<K: Copy> Loops<K> {
+    /// No loops, with room for `loops` loops of `points` points in all.
+    pub fn with_capacity(loops: usize, points: usize) -> Self {
+        Loops { points: Vec::with_capacity(points), ends: Vec::with_capacity(loops) }
+    }
+
     /// No loops (the room is kept).
     pub fn clear(&mut self) {
         self.points.clear();

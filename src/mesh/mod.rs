@@ -321,8 +321,10 @@ impl PolyMesh {
     /// diameter, the fold of a cap bent through a snapped node its
     /// distance from the cut plane.
     pub fn non_convexity(&self, e: usize) -> f64 {
-        let mut loops = Loops::default();
-        for r in &self.elements[e].faces {
+        let faces = &self.elements[e].faces;
+        let points = faces.iter().map(|r| self.faces[r.face as usize].vertices.len()).sum();
+        let mut loops = Loops::with_capacity(faces.len(), points);
+        for r in faces {
             let lp = &self.faces[r.face as usize].vertices;
             let point = |&v: &u32| (v, self.nodes[v as usize]);
             match r.outward {

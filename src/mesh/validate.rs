@@ -6,6 +6,7 @@
 
 use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
+use smallvec::SmallVec;
 
 use cleave_kernels::vec3::{dot, sub};
 use thiserror::Error;
@@ -308,8 +309,9 @@ impl PolyMesh {
     fn check_element_closed(&self, e: usize) -> Result<(), MeshError> {
         // every directed use of an edge as (lower node, higher node, +1 along
         // it or -1 against), sorted: the uses of one edge lie together (a
-        // sort, not a hash map: a cut checks thousands of elements)
-        let mut uses: Vec<((u32, u32), i32)> = Vec::new();
+        // sort, not a hash map, on the stack: a cut checks thousands of
+        // elements)
+        let mut uses: SmallVec<[((u32, u32), i32); 64]> = SmallVec::new();
         for r in &self.elements[e].faces {
             let v = &self.faces[r.face as usize].vertices;
             for i in 0..v.len() {

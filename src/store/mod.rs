@@ -626,18 +626,22 @@ pub(crate) fn fill_batch<S>(
     let nt = if with_triangles { 2 * k - 4 } else { 0 };
     let mut triangles = vec![[0u32; 3]; n * nt];
     if with_triangles {
-        for (i, &e) in elements.iter().enumerate() {
+        // (each element's triangles in its own stretch, in parallel; the
+        // first element in order with a wrong count is named)
+        let wrong = triangles.par_chunks_mut(nt.max(1)).zip(&elements).enumerate().find_map_first(|(i, (out, &e))| {
             let local = &nodes[i * k..(i + 1) * k];
-            let tris: Vec<[u32; 3]> = mesh
-                .element_triangles(e as usize)
-                .map(|t| t.map(|g| local.binary_search(&g).expect("triangle vertex is an element node") as u32))
-                .collect();
-            if tris.len() != nt {
-                // a closed triangulated sphere with k vertices has 2k - 4 triangles
-                let volume = mesh.element_volume(e as usize);
-                return Err(BasisError::DegenerateElement { element: e as usize, volume });
+            let mut count = 0;
+            for t in mesh.element_triangles(e as usize) {
+                if let Some(slot) = out.get_mut(count) {
+                    *slot = t.map(|g| local.binary_search(&g).expect("triangle vertex is an element node") as u32);
+                }
+                count += 1;
             }
-            triangles[i * nt..(i + 1) * nt].copy_from_slice(&tris);
+            // a closed triangulated sphere with k vertices has 2k - 4 triangles
+            (count != nt).then_some(e as usize)
+        });
+        if let Some(element) = wrong {
+            return Err(BasisError::DegenerateElement { element, volume: mesh.element_volume(element) });
         }
     }
     let mut volume = vec![0.0; n];
