@@ -231,10 +231,11 @@ struct NewColumn {
 impl NewColumn {
     /// The column of node `j` touched by `incidences`.
     fn of(j: usize, incidences: Vec<Incidence>, store: &impl Couplings) -> Self {
-        let mut rows: Vec<u32> = incidences
-            .iter()
-            .flat_map(|inc| store.blocks(inc.batch as usize, inc.element as usize).iter().copied())
-            .collect();
+        // (sized once: a cut recomputes thousands of columns)
+        let mut rows: Vec<u32> = Vec::with_capacity(incidences.iter().map(|inc| inc.size as usize).sum::<usize>() + 1);
+        for inc in &incidences {
+            rows.extend_from_slice(store.blocks(inc.batch as usize, inc.element as usize));
+        }
         rows.push(j as u32); // lone nodes keep their diagonal
         rows.sort_unstable();
         rows.dedup();

@@ -300,27 +300,27 @@ pub fn cut_by_polygon_keeping(
     }
     let mut edge_node: HashMap<(u32, u32), u32> = HashMap::default();
     let mut touched_faces: Vec<u32> = Vec::new();
+    // (the face's loop and its vertices' sides, reused from face to face)
+    let (mut lp, mut s): (Vec<u32>, Vec<i8>) = (Vec::new(), Vec::new());
     for i in 0..n_pts {
         let (a2, b2) = (outline[i], outline[(i + 1) % n_pts]);
         let mut k = 0;
         while k < in_plane.len() {
             let f = in_plane[k] as usize;
             k += 1;
-            let lp = mesh.faces[f].vertices.clone();
-            let s: Vec<i8> = lp
-                .iter()
-                .map(|&v| {
-                    let d = side_of(a2, b2, frame.project(mesh.nodes[v as usize]));
-                    // (nodes made here lie on the line up to rounding)
-                    if d.abs() <= line_snap.get(&v).copied().unwrap_or(0.0).max(ON_PLANE * size) {
-                        0
-                    } else if d > 0.0 {
-                        1
-                    } else {
-                        -1
-                    }
-                })
-                .collect();
+            lp.clone_from(&mesh.faces[f].vertices);
+            s.clear();
+            s.extend(lp.iter().map(|&v| {
+                let d = side_of(a2, b2, frame.project(mesh.nodes[v as usize]));
+                // (nodes made here lie on the line up to rounding)
+                if d.abs() <= line_snap.get(&v).copied().unwrap_or(0.0).max(ON_PLANE * size) {
+                    0
+                } else if d > 0.0 {
+                    1
+                } else {
+                    -1
+                }
+            }));
             // a proper crossing of a convex face has exactly two cut points
             // (vertices on the line, or sign changes); anything else is the
             // line grazing the face within the snapping distance

@@ -683,7 +683,8 @@ pub(crate) fn split(
             }
             // (the face's loop is replaced by its positive part below)
             let v = std::mem::take(&mut mesh.faces[r.face as usize].vertices);
-            let (mut pos, mut neg) = (Vec::new(), Vec::new());
+            // (a convex face's parts gain at most the two crossings)
+            let (mut pos, mut neg) = (Vec::with_capacity(v.len() + 2), Vec::with_capacity(v.len() + 2));
             for i in 0..v.len() {
                 let (a, b) = (v[i], v[(i + 1) % v.len()]);
                 let sa = side[a as usize];
@@ -770,7 +771,9 @@ pub(crate) fn split(
     let mut outward = Loops::default();
     let mut positions: Vec<[f64; 3]> = Vec::new();
     for &e in &crossed {
-        let (mut pos_faces, mut neg_faces) = (Vec::new(), Vec::new());
+        // (each part takes at most every face and a cap piece or two)
+        let room = mesh.elements[e].faces.len() + 2;
+        let (mut pos_faces, mut neg_faces) = (Vec::with_capacity(room), Vec::with_capacity(room));
         for r in &mesh.elements[e].faces {
             if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
                 pos_faces.push(FaceRef { face: fp, outward: r.outward });
