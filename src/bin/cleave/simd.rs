@@ -3,15 +3,16 @@
 //! AVX-512 forced in turn through [`cap_simd_level`]), in one run.
 //!
 //! The reference is the kernel's plain-`f64` function (`*_scalar`), except
-//! for the block sparse product and the envelope Cholesky, which have none:
-//! their reference is the same code on pulp's one-lane scalar backend. Rows report the time of a fixed
+//! for the block sparse product, the health check's spectra and the
+//! envelope Cholesky, which have none: their reference is the same code on
+//! pulp's one-lane scalar backend. Rows report the time of a fixed
 //! amount of work and the speed-up over the reference; every kernel gives
 //! the same bits at every level (their tests check it), so only speed
 //! differs.
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
-use cleave_kernels::{elasticity, envelope, harmonic, logarithm, moments, polynomial, rotation, spmv};
+use cleave_kernels::{elasticity, envelope, harmonic, logarithm, moments, polynomial, rotation, spectrum, spmv};
 
 use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
 
@@ -207,6 +208,53 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                 cap_simd_level(Some(SimdLevel::Scalar));
             }
             let (ms, _) = best_ms(5 * scale, || spmv::block_products(blocks.columns(), &values, &x, 0, &mut y));
+            ms
+        }),
+    });
+
+    // the health check's spectra: the tetrahedra of that box in closed
+    // form, and the K_e of an 8-vertex mean value element as a run of
+    // elements (what a cut's pieces give one task); neither has a plain-f64
+    // function: the reference is the same code on pulp's one-lane backend
+    let tets = &store.batches[0];
+    let (tet_count, lame) = (tets.len(), tets.lame);
+    let (tet_rest, tet_grads, tet_volume) = (tets.rest.clone(), tets.stress_grads.clone(), tets.volume.clone());
+    let mut tet_out = vec![spectrum::Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; tet_count];
+    kernels.push(Kernel {
+        name: "tetrahedron spectra",
+        size: format!("{tet_count} tetrahedra"),
+        run: Box::new(move |reference| {
+            if reference {
+                cap_simd_level(Some(SimdLevel::Scalar));
+            }
+            let (ms, ()) =
+                best_ms(3, || spectrum::tet_spectra(&tet_rest, &tet_grads, &tet_volume, lame.0, lame.1, &mut tet_out));
+            ms
+        }),
+    });
+    let element =
+        cleave::meshing::element_with_vertices(8).ok_or_else(|| Error::Internal("no 8-vertex element".into()))?;
+    let element_store = cleave::store::ElementStore::build(
+        &element,
+        &cleave::material::Material::new(1e7, 0.3, 1000.0)?,
+        &cleave::store::BasisOptions::default(),
+    )?;
+    let batch = &element_store.batches[0];
+    let mut ke = vec![0.0; 24 * 24];
+    batch.element_matrix_into(0, &mut ke);
+    let run = 64 * scale;
+    let k_e: Vec<f64> = (0..run).flat_map(|_| ke.iter().copied()).collect();
+    let x: Vec<[f64; 3]> = (0..run).flat_map(|_| batch.rest[..8].iter().copied()).collect();
+    let mut element_out = vec![spectrum::Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; run];
+    kernels.push(Kernel {
+        name: "stiffness spectra",
+        size: format!("{run} x 24 x 24 K_e"),
+        run: Box::new(move |reference| {
+            if reference {
+                cap_simd_level(Some(SimdLevel::Scalar));
+            }
+            let modes = spectrum::RigidModes::Nodal(&x);
+            let (ms, ()) = best_ms(3, || spectrum::stiffness_spectra(&k_e, modes, &mut element_out));
             ms
         }),
     });
