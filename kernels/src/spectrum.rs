@@ -202,6 +202,12 @@ fn less<R: Real>(a: R, b: R) -> R {
     a.select_less(b, a.constant(1.0), a.constant(0.0))
 }
 
+/// 1 where `now` differs from `before` by at most [`SETTLED`] of `now`.
+#[inline(always)]
+fn settled<R: Real>(now: R, before: R) -> R {
+    now.constant(1.0) - less(now.constant(SETTLED) * now, (now - before).abs())
+}
+
 /// `x` where `mask` is 1, else `y`.
 #[inline(always)]
 fn blend<R: Real>(mask: R, x: R, y: R) -> R {
@@ -224,7 +230,9 @@ fn unit_into<R: Real>(v: &[R], out: &mut [R]) -> R {
 fn normalise<R: Real>(v: &mut [R]) {
     let len = dot(v, v).sqrt();
     let positive = less(len.constant(0.0), len);
-    v.iter_mut().for_each(|x| *x = blend(positive, *x / len, *x));
+    for x in v.iter_mut() {
+        *x = blend(positive, *x / len, *x);
+    }
 }
 
 /// A fixed, deterministic start vector with no special structure.
@@ -267,7 +275,9 @@ fn estimate<R: Real>(k_e: &[R], x: &[[R; 3]], modal: bool, work: &mut [R]) -> [R
     if !modal {
         let count = zero.constant(x.len() as f64);
         for p in x {
-            (0..3).for_each(|i| c[i] = c[i] + p[i] / count);
+            for i in 0..3 {
+                c[i] = c[i] + p[i] / count;
+            }
         }
     }
     for (m, mode) in q.chunks_exact_mut(n).enumerate() {
@@ -294,7 +304,6 @@ fn estimate<R: Real>(k_e: &[R], x: &[[R; 3]], modal: bool, work: &mut [R]) -> [R
     // (or its vector vanishes)
     start_vector(v);
     normalise(v);
-    let settled = |now: R, before: R| one - less(zero.constant(SETTLED) * now, (now - before).abs());
     let (mut lambda_max, mut active) = (zero, one);
     for _ in 0..POWER_STEPS {
         if active.max_lane() == 0.0 {
@@ -352,7 +361,9 @@ fn estimate<R: Real>(k_e: &[R], x: &[[R; 3]], modal: bool, work: &mut [R]) -> [R
         for i in j + 1..n {
             let (above, row) = a.split_at_mut(i * n);
             let (li, column) = (row[j], &above[j * n + j + 1..j * n + i + 1]);
-            row[j + 1..i + 1].iter_mut().zip(column).for_each(|(x, &l)| *x = *x - li * l);
+            for (x, &l) in row[j + 1..i + 1].iter_mut().zip(column) {
+                *x = *x - li * l;
+            }
         }
     }
     start_vector(v);
@@ -370,13 +381,17 @@ fn estimate<R: Real>(k_e: &[R], x: &[[R; 3]], modal: bool, work: &mut [R]) -> [R
             y[j] = y[j] * inverse_diagonal[j];
             let (head, tail) = y.split_at_mut(j + 1);
             let yj = head[j];
-            tail.iter_mut().zip(&a[j * n + j + 1..(j + 1) * n]).for_each(|(t, &l)| *t = *t - yj * l);
+            for (t, &l) in tail.iter_mut().zip(&a[j * n + j + 1..(j + 1) * n]) {
+                *t = *t - yj * l;
+            }
         }
         for j in (0..n).rev() {
             y[j] = y[j] * inverse_diagonal[j];
             let (head, tail) = y.split_at_mut(j);
             let yj = tail[0];
-            head.iter_mut().zip(&a[j * n..j * n + j]).for_each(|(t, &l)| *t = *t - yj * l);
+            for (t, &l) in head.iter_mut().zip(&a[j * n..j * n + j]) {
+                *t = *t - yj * l;
+            }
         }
         // vᵀ A⁻¹ v rises to 1 / λ₇; a lane stops once it has settled
         let estimate = dot(v, y);
@@ -448,13 +463,20 @@ impl pulp::WithSimd for TetSpectra<'_> {
             // lanes past the last tetrahedron repeat it (not read)
             let (first, last) = (group * width, out.len() - 1);
             let tet = |l: usize| first + l.min(last);
-            let mut load = |value: &dyn Fn(usize) -> f64| {
-                (0..width).for_each(|l| lane[l] = value(tet(l)));
-                Lanes::load(simd, &lane[..width])
-            };
-            let xs: [[Lanes<S>; 3]; 4] = std::array::from_fn(|a| std::array::from_fn(|i| load(&|t| x[4 * t + a][i])));
-            let gs: [[Lanes<S>; 3]; 4] = std::array::from_fn(|a| std::array::from_fn(|i| load(&|t| g[4 * t + a][i])));
-            let vs = load(&|t| volume[t]);
+            // (loops, not closures, around the lane loads: a closure need
+            // not be inlined, and then runs without the instruction set)
+            let zero = Lanes::splat(simd, 0.0);
+            let (mut xs, mut gs) = ([[zero; 3]; 4], [[zero; 3]; 4]);
+            for a in 0..4 {
+                for i in 0..3 {
+                    (0..width).for_each(|l| lane[l] = x[4 * tet(l) + a][i]);
+                    xs[a][i] = Lanes::load(simd, &lane[..width]);
+                    (0..width).for_each(|l| lane[l] = g[4 * tet(l) + a][i]);
+                    gs[a][i] = Lanes::load(simd, &lane[..width]);
+                }
+            }
+            (0..width).for_each(|l| lane[l] = volume[tet(l)]);
+            let vs = Lanes::load(simd, &lane[..width]);
             let estimates = tet_estimate(&xs, &gs, vs, lame.0, lame.1);
             let mut values = [[0.0f64; 16]; 3];
             for (v, lanes) in values.iter_mut().zip(estimates) {
@@ -472,20 +494,9 @@ impl pulp::WithSimd for TetSpectra<'_> {
 #[inline(always)]
 fn tet_estimate<R: Real>(x: &[[R; 3]; 4], g: &[[R; 3]; 4], volume: R, lambda: f64, mu: f64) -> [R; 3] {
     let zero = volume.constant(0.0);
-    // B_a (6 x 3) for gradient g: rows xx, yy, zz, xy, xz, yz
-    let b = |g: [R; 3]| -> [[R; 3]; 6] {
-        [
-            [g[0], zero, zero],
-            [zero, g[1], zero],
-            [zero, zero, g[2]],
-            [g[1], g[0], zero],
-            [g[2], zero, g[0]],
-            [zero, g[2], g[1]],
-        ]
-    };
     let mut bbt = [[zero; 6]; 6];
     for ga in g {
-        let ba = b(*ga);
+        let ba = strain_rows(*ga);
         for r in 0..6 {
             for c in 0..6 {
                 bbt[r][c] = bbt[r][c] + (ba[r][0] * ba[c][0] + ba[r][1] * ba[c][1] + ba[r][2] * ba[c][2]);
@@ -502,11 +513,10 @@ fn tet_estimate<R: Real>(x: &[[R; 3]; 4], g: &[[R; 3]; 4], volume: R, lambda: f6
         }
         half[3 + r][3 + r] = zero.constant(ss);
     }
-    let product = |a: &[[R; 6]; 6], b: &[[R; 6]; 6]| -> [[R; 6]; 6] {
-        std::array::from_fn(|r| std::array::from_fn(|c| (1..6).fold(a[r][0] * b[0][c], |s, p| s + a[r][p] * b[p][c])))
-    };
-    let mut m = product(&product(&half, &bbt), &half);
-    m.iter_mut().flatten().for_each(|v| *v = *v * volume);
+    let mut m = product6(&product6(&half, &bbt), &half);
+    for v in m.iter_mut().flatten() {
+        *v = *v * volume;
+    }
     let values = jacobi_eigenvalues(m);
     let (lo, hi) = values[1..].iter().fold((values[0], values[0]), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     let mut diameter = zero;
@@ -526,6 +536,37 @@ fn tet_estimate<R: Real>(x: &[[R; 3]; 4], g: &[[R; 3]; 4], volume: R, lambda: f6
         }
     }
     [hi, lo.max(zero), residual]
+}
+
+/// `B_a` (6 x 3) of the strain operator for gradient `g`: rows xx, yy,
+/// zz, xy, xz, yz (engineering shears).
+#[inline(always)]
+fn strain_rows<R: Real>(g: [R; 3]) -> [[R; 3]; 6] {
+    let zero = g[0].constant(0.0);
+    [
+        [g[0], zero, zero],
+        [zero, g[1], zero],
+        [zero, zero, g[2]],
+        [g[1], g[0], zero],
+        [g[2], zero, g[0]],
+        [zero, g[2], g[1]],
+    ]
+}
+
+/// The product of two 6 x 6 matrices, each entry summed in index order.
+#[inline(always)]
+fn product6<R: Real>(a: &[[R; 6]; 6], b: &[[R; 6]; 6]) -> [[R; 6]; 6] {
+    let mut out = [[a[0][0]; 6]; 6];
+    for (row, a_row) in out.iter_mut().zip(a) {
+        for (c, entry) in row.iter_mut().enumerate() {
+            let mut sum = a_row[0] * b[0][c];
+            for p in 1..6 {
+                sum = sum + a_row[p] * b[p][c];
+            }
+            *entry = sum;
+        }
+    }
+    out
 }
 
 /// 1 where `x` is not zero, else 0.
