@@ -102,7 +102,7 @@ fn health(c: &mut Criterion) {
         group.bench_function(*name, |b| b.iter(|| stiffness_spectrum(k, RigidModes::Nodal(x))));
         let ks: Vec<f64> = (0..RUN).flat_map(|_| k.iter().copied()).collect();
         let xs: Vec<[f64; 3]> = (0..RUN).flat_map(|_| x.iter().copied()).collect();
-        let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; RUN];
+        let mut out = vec![Spectrum::default(); RUN];
         group.throughput(Throughput::Elements(RUN as u64));
         group.bench_function(format!("{name}_run_of_{RUN}"), |b| {
             b.iter(|| stiffness_spectra(&ks, RigidModes::Nodal(&xs), &mut out))

@@ -57,7 +57,7 @@ pub const INVERSE_STEPS: usize = 30;
 pub const SETTLED: f64 = 1e-3;
 
 /// What [`stiffness_spectrum`] found.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Spectrum {
     /// Estimate of the largest eigenvalue (N/m), from below.
     pub lambda_max: f64,
@@ -103,7 +103,7 @@ impl RigidModes<'_> {
 /// The spectrum estimates of the module docs for the row-major `n x n`
 /// stiffness `k_e` (`n = 3 k`, `k` the number of positions in `modes`).
 pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes) -> Spectrum {
-    let mut out = [Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }];
+    let mut out = [Spectrum::default()];
     stiffness_spectra(k_e, modes, &mut out);
     out[0]
 }
@@ -144,31 +144,52 @@ impl pulp::WithSimd for Spectra<'_> {
         let zero = Lanes::splat(simd, 0.0);
         let (mut matrix, mut x) = (vec![zero; n * n], vec![[zero; 3]; k]);
         let mut work = vec![zero; work_len(n)];
-        let mut lane = [0.0f64; 16];
         for (group, out) in out.chunks_mut(width).enumerate() {
-            // lane l holds element `first + l`; lanes past the last element
-            // repeat it (their results are not read)
-            let (first, last) = (group * width, out.len() - 1);
-            let element = |l: usize| first + l.min(last);
+            let element = lane_items(group, width, out.len());
             for (e, m) in matrix.iter_mut().enumerate() {
-                (0..width).for_each(|l| lane[l] = k_e[element(l) * n * n + e]);
-                *m = Lanes::load(simd, &lane[..width]);
+                *m = gather(simd, |l| k_e[element(l) * n * n + e]);
             }
             for (a, xa) in x.iter_mut().enumerate() {
                 for (i, xi) in xa.iter_mut().enumerate() {
-                    (0..width).for_each(|l| lane[l] = positions[element(l) * k + a][i]);
-                    *xi = Lanes::load(simd, &lane[..width]);
+                    *xi = gather(simd, |l| positions[element(l) * k + a][i]);
                 }
             }
-            let [lambda_max, lambda_7, rigid_residual] = estimate(&matrix, &x, modal, &mut work);
-            let mut values = [[0.0f64; 16]; 3];
-            for (v, lanes) in values.iter_mut().zip([lambda_max, lambda_7, rigid_residual]) {
-                lanes.store(&mut v[..width]);
-            }
-            for (l, s) in out.iter_mut().enumerate() {
-                *s = Spectrum { lambda_max: values[0][l], lambda_7: values[1][l], rigid_residual: values[2][l] };
-            }
+            scatter(estimate(&matrix, &x, modal, &mut work), out);
         }
+    }
+}
+
+/// The item lane `l` of group `group` holds: `group * width + l`, lanes
+/// past the group's `count` items repeating its last (their results are
+/// not read).
+fn lane_items(group: usize, width: usize, count: usize) -> impl Fn(usize) -> usize {
+    move |l| group * width + l.min(count - 1)
+}
+
+/// Lanes holding `value(l)` in lane `l`. (The lane arithmetic stays out of
+/// closures: a closure need not be inlined, and one that is not runs
+/// without the instruction set its caller was dispatched to; `value` only
+/// reads.)
+#[inline(always)]
+fn gather<S: Simd>(simd: S, value: impl Fn(usize) -> f64) -> Lanes<S> {
+    let mut lane = [0.0f64; 16];
+    let width = Lanes::<S>::WIDTH;
+    for (l, v) in lane[..width].iter_mut().enumerate() {
+        *v = value(l);
+    }
+    Lanes::load(simd, &lane[..width])
+}
+
+/// Lane `l` of the estimates `[λ_max, λ₇, rigid residual]` into `out[l]`.
+#[inline(always)]
+fn scatter<S: Simd>(estimates: [Lanes<S>; 3], out: &mut [Spectrum]) {
+    let width = Lanes::<S>::WIDTH;
+    let mut values = [[0.0f64; 16]; 3];
+    for (v, lanes) in values.iter_mut().zip(estimates) {
+        lanes.store(&mut v[..width]);
+    }
+    for (l, s) in out.iter_mut().enumerate() {
+        *s = Spectrum { lambda_max: values[0][l], lambda_7: values[1][l], rigid_residual: values[2][l] };
     }
 }
 
@@ -458,33 +479,18 @@ impl pulp::WithSimd for TetSpectra<'_> {
     fn with_simd<S: Simd>(self, simd: S) {
         let width = Lanes::<S>::WIDTH;
         let TetSpectra { x, g, volume, lame, out } = self;
-        let mut lane = [0.0f64; 16];
         for (group, out) in out.chunks_mut(width).enumerate() {
-            // lanes past the last tetrahedron repeat it (not read)
-            let (first, last) = (group * width, out.len() - 1);
-            let tet = |l: usize| first + l.min(last);
-            // (loops, not closures, around the lane loads: a closure need
-            // not be inlined, and then runs without the instruction set)
+            let tet = lane_items(group, width, out.len());
             let zero = Lanes::splat(simd, 0.0);
             let (mut xs, mut gs) = ([[zero; 3]; 4], [[zero; 3]; 4]);
             for a in 0..4 {
                 for i in 0..3 {
-                    (0..width).for_each(|l| lane[l] = x[4 * tet(l) + a][i]);
-                    xs[a][i] = Lanes::load(simd, &lane[..width]);
-                    (0..width).for_each(|l| lane[l] = g[4 * tet(l) + a][i]);
-                    gs[a][i] = Lanes::load(simd, &lane[..width]);
+                    xs[a][i] = gather(simd, |l| x[4 * tet(l) + a][i]);
+                    gs[a][i] = gather(simd, |l| g[4 * tet(l) + a][i]);
                 }
             }
-            (0..width).for_each(|l| lane[l] = volume[tet(l)]);
-            let vs = Lanes::load(simd, &lane[..width]);
-            let estimates = tet_estimate(&xs, &gs, vs, lame.0, lame.1);
-            let mut values = [[0.0f64; 16]; 3];
-            for (v, lanes) in values.iter_mut().zip(estimates) {
-                lanes.store(&mut v[..width]);
-            }
-            for (l, s) in out.iter_mut().enumerate() {
-                *s = Spectrum { lambda_max: values[0][l], lambda_7: values[1][l], rigid_residual: values[2][l] };
-            }
+            let vs = gather(simd, |l| volume[tet(l)]);
+            scatter(tet_estimate(&xs, &gs, vs, lame.0, lame.1), out);
         }
     }
 }
@@ -778,7 +784,7 @@ mod tests {
                 let order: Vec<usize> = (0..matrices.len()).map(|i| (i + shift) % matrices.len()).collect();
                 let k_e: Vec<f64> = order.iter().flat_map(|&i| matrices[i].iter().copied()).collect();
                 let positions: Vec<[f64; 3]> = order.iter().flat_map(|_| x.iter().copied()).collect();
-                let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; order.len()];
+                let mut out = vec![Spectrum::default(); order.len()];
                 let op = Spectra { k_e: &k_e, positions: &positions, modal: false, out: &mut out };
                 crate::lanes::levels::run(level, op);
                 for (s, &i) in out.iter().zip(&order) {

@@ -141,7 +141,7 @@ fn spectra(batches: &[Batch]) -> Vec<Vec<Spectrum>> {
         .map_init(Vec::new, |ke, (b, range)| {
             let batch = &batches[*b];
             let (k, n) = (batch.k, 3 * batch.k);
-            let mut out = vec![Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; range.len()];
+            let mut out = vec![Spectrum::default(); range.len()];
             let x = &batch.rest[range.start * k..range.end * k];
             if batch.is_tet() {
                 // the nonzero spectrum of a 6 x 6 matrix

@@ -23,6 +23,20 @@ struct Kernel<'a> {
     run: Box<dyn FnMut(bool) -> f64 + 'a>,
 }
 
+impl<'a> Kernel<'a> {
+    /// A kernel without a plain-`f64` function: its reference is `run` on
+    /// pulp's one-lane scalar backend.
+    fn one_lane(name: &'static str, size: String, mut run: impl FnMut() -> f64 + 'a) -> Self {
+        let run = move |reference: bool| {
+            if reference {
+                cap_simd_level(Some(SimdLevel::Scalar));
+            }
+            run()
+        };
+        Kernel { name, size, run: Box::new(run) }
+    }
+}
+
 /// A deterministic value in `[-1, 1)` from `i`.
 fn noise(i: usize) -> f64 {
     let x = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
@@ -198,19 +212,14 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     let values: Vec<f32> = (0..pattern.nnz()).map(|i| noise(i) as f32).collect();
     let x: Vec<f64> = (0..3 * pattern.num_blocks).map(|i| noise(i + 1)).collect();
     let mut y = vec![0.0; x.len()];
-    kernels.push(Kernel {
-        name: "block sparse product",
-        size: format!("K of box_tet {}x{}x{}, {} f32 values", cells[0], cells[1], cells[2], values.len()),
-        run: Box::new(move |reference| {
-            // the kernel has no plain-f64 function: its reference is the
-            // same code on pulp's one-lane scalar backend
-            if reference {
-                cap_simd_level(Some(SimdLevel::Scalar));
-            }
+    kernels.push(Kernel::one_lane(
+        "block sparse product",
+        format!("K of box_tet {}x{}x{}, {} f32 values", cells[0], cells[1], cells[2], values.len()),
+        move || {
             let (ms, _) = best_ms(5 * scale, || spmv::block_products(blocks.columns(), &values, &x, 0, &mut y));
             ms
-        }),
-    });
+        },
+    ));
 
     // the health check's spectra: the tetrahedra of that box in closed
     // form, and the K_e of an 8-vertex mean value element as a run of
@@ -219,19 +228,12 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     let tets = &store.batches[0];
     let (tet_count, lame) = (tets.len(), tets.lame);
     let (tet_rest, tet_grads, tet_volume) = (tets.rest.clone(), tets.stress_grads.clone(), tets.volume.clone());
-    let mut tet_out = vec![spectrum::Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; tet_count];
-    kernels.push(Kernel {
-        name: "tetrahedron spectra",
-        size: format!("{tet_count} tetrahedra"),
-        run: Box::new(move |reference| {
-            if reference {
-                cap_simd_level(Some(SimdLevel::Scalar));
-            }
-            let (ms, ()) =
-                best_ms(3, || spectrum::tet_spectra(&tet_rest, &tet_grads, &tet_volume, lame.0, lame.1, &mut tet_out));
-            ms
-        }),
-    });
+    let mut tet_out = vec![spectrum::Spectrum::default(); tet_count];
+    kernels.push(Kernel::one_lane("tetrahedron spectra", format!("{tet_count} tetrahedra"), move || {
+        let (ms, ()) =
+            best_ms(3, || spectrum::tet_spectra(&tet_rest, &tet_grads, &tet_volume, lame.0, lame.1, &mut tet_out));
+        ms
+    }));
     let element =
         cleave::meshing::element_with_vertices(8).ok_or_else(|| Error::Internal("no 8-vertex element".into()))?;
     let element_store = cleave::store::ElementStore::build(
@@ -245,19 +247,12 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     let run = 64 * scale;
     let k_e: Vec<f64> = (0..run).flat_map(|_| ke.iter().copied()).collect();
     let x: Vec<[f64; 3]> = (0..run).flat_map(|_| batch.rest[..8].iter().copied()).collect();
-    let mut element_out = vec![spectrum::Spectrum { lambda_max: 0.0, lambda_7: 0.0, rigid_residual: 0.0 }; run];
-    kernels.push(Kernel {
-        name: "stiffness spectra",
-        size: format!("{run} x 24 x 24 K_e"),
-        run: Box::new(move |reference| {
-            if reference {
-                cap_simd_level(Some(SimdLevel::Scalar));
-            }
-            let modes = spectrum::RigidModes::Nodal(&x);
-            let (ms, ()) = best_ms(3, || spectrum::stiffness_spectra(&k_e, modes, &mut element_out));
-            ms
-        }),
-    });
+    let mut element_out = vec![spectrum::Spectrum::default(); run];
+    kernels.push(Kernel::one_lane("stiffness spectra", format!("{run} x 24 x 24 K_e"), move || {
+        let modes = spectrum::RigidModes::Nodal(&x);
+        let (ms, ()) = best_ms(3, || spectrum::stiffness_spectra(&k_e, modes, &mut element_out));
+        ms
+    }));
 
     // the envelope Cholesky of a banded system of the size it serves (450
     // unknowns, 150 blocks, each coupled to the 20 blocks before it)
@@ -273,16 +268,11 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
         .collect();
     let (mut factor, mut inverse_diagonal) = (lower.clone(), vec![0.0; n]);
     let reps = 20 * scale;
-    kernels.push(Kernel {
-        name: "envelope cholesky",
-        size: format!("{reps} x {n} unknowns, bandwidth {}", 3 * band + 2),
-        run: Box::new(move |reference| {
+    kernels.push(Kernel::one_lane(
+        "envelope cholesky",
+        format!("{reps} x {n} unknowns, bandwidth {}", 3 * band + 2),
+        move || {
             let envelope = envelope::Envelope { first: &first, start: &start };
-            // no plain-f64 function either: the reference is the same code
-            // on pulp's one-lane scalar backend
-            if reference {
-                cap_simd_level(Some(SimdLevel::Scalar));
-            }
             let (ms, ()) = best_ms(3, || {
                 for _ in 0..reps {
                     factor.copy_from_slice(&lower);
@@ -290,8 +280,8 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                 }
             });
             ms
-        }),
-    });
+        },
+    ));
 
     let mut out = Vec::new();
     for mut kernel in kernels {
