@@ -40,7 +40,7 @@
 //! every element's estimates are the same bits at every SIMD level, alone
 //! or beside any other elements: the result depends neither on the thread
 //! that computes it nor on the machine. `cargo bench --bench cut --
-//! health_spectrum` measures one element and a group of a lane width.
+//! health_spectrum` measures one element alone and in a run of 32.
 
 use pulp::Simd;
 
