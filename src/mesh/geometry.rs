@@ -102,72 +102,9 @@ pub fn loop_geometry(n: usize, point: impl Fn(usize) -> [f64; 3]) -> FaceGeometr
     FaceGeometry { normal, area: 0.5 * len, centroid, max_deviation, diameter: d2.sqrt() }
 }
 
-/// Closed loops of keyed points (a key names a point: two loops share an
-/// edge where they hold the same two keys next to each other), one after
-/// another: building them allocates nothing per loop, and cleared they
-/// keep their room.
-#[derive(Clone, Debug)]
-pub struct Loops<K> {
-    points: Vec<(K, [f64; 3])>,
-    ends: Vec<usize>,
-}
-
-impl<K> Default for Loops<K> {
-    fn default() -> Self {
-        Loops { points: Vec::new(), ends: Vec::new() }
-    }
-}
-
-impl<K: Copy> Loops<K> {
-    /// No loops, with room for `loops` loops of `points` points in all.
-    pub fn with_capacity(loops: usize, points: usize) -> Self {
-        Loops { points: Vec::with_capacity(points), ends: Vec::with_capacity(loops) }
-    }
-
-    /// No loops (the room is kept).
-    pub fn clear(&mut self) {
-        self.points.clear();
-        self.ends.clear();
-    }
-
-    /// Appends one loop.
-    pub fn push(&mut self, points: impl IntoIterator<Item = (K, [f64; 3])>) {
-        self.points.extend(points);
-        self.ends.push(self.points.len());
-    }
-
-    /// Reverses the last loop.
-    pub fn reverse_last(&mut self) {
-        let start = if self.ends.len() < 2 { 0 } else { self.ends[self.ends.len() - 2] };
-        self.points[start..].reverse();
-    }
-
-    /// Number of loops.
-    pub fn len(&self) -> usize {
-        self.ends.len()
-    }
-
-    /// Whether there are no loops.
-    pub fn is_empty(&self) -> bool {
-        self.ends.is_empty()
-    }
-
-    /// Loop `i`.
-    pub fn get(&self, i: usize) -> &[(K, [f64; 3])] {
-        let start = if i == 0 { 0 } else { self.ends[i - 1] };
-        &self.points[start..self.ends[i]]
-    }
-
-    /// The loops in order.
-    pub fn iter(&self) -> impl Iterator<Item = &[(K, [f64; 3])]> + Clone {
-        (0..self.len()).map(|i| self.get(i))
-    }
-
-    /// Every point of every loop, loop after loop.
-    pub fn points(&self) -> &[(K, [f64; 3])] {
-        &self.points
-    }
-}
+/// Closed face loops of keyed points (a key names a point: two loops share
+/// an edge where they hold the same two keys next to each other).
+pub type Loops<K> = super::lists::Lists<(K, [f64; 3])>;
 
 /// The depth (m) of the deepest fold of a closed surface given as planar
 /// face loops. At an edge where faces `f` and `g` meet, the fold's depth
@@ -192,7 +129,7 @@ pub fn fold_depth<K: Copy + Ord>(loops: &Loops<K>) -> f64 {
     // every loop's edges, sorted: a loop meets the first loop (in loop
     // order) that holds the same edge (a sort, not a hash map: cuts and
     // element builds measure thousands of elements)
-    let mut edges: SmallVec<[((K, K), usize); 64]> = SmallVec::with_capacity(loops.points().len());
+    let mut edges: SmallVec<[((K, K), usize); 64]> = SmallVec::with_capacity(loops.values().len());
     for (k, lp) in loops.iter().enumerate() {
         for i in 0..lp.len() {
             let (a, b) = (lp[i].0, lp[(i + 1) % lp.len()].0);

@@ -12,12 +12,14 @@
 
 mod adjacency;
 mod geometry;
+mod lists;
 mod repair;
 mod triangulate;
 mod validate;
 
 pub use adjacency::Adjacency;
 pub use geometry::{face_geometry, fold_depth, loop_geometry, FaceGeometry, Loops, Plane};
+pub use lists::Lists;
 pub use triangulate::triangulate_loop;
 pub use validate::{MeshError, ValidationOptions};
 

@@ -13,7 +13,7 @@
 use super::split::on_plane_band;
 use super::CutScope;
 use crate::mesh::Plane;
-use crate::mesh::{Element, Face, FaceRef, PolyMesh};
+use crate::mesh::{Element, Face, FaceRef, Lists, PolyMesh};
 use rayon::prelude::*;
 
 /// What a cut may change, saved before it runs (flat, so saving costs no
@@ -25,42 +25,14 @@ pub struct Rollback {
     elements: usize,
     /// Saved elements (sorted ids), their face references and nodes.
     elements_saved: Vec<u32>,
-    element_faces: Flat<FaceRef>,
-    element_nodes: Flat<u32>,
+    element_faces: Lists<FaceRef>,
+    element_nodes: Lists<u32>,
     /// Saved faces (sorted ids), their loops and triangles.
     faces_saved: Vec<u32>,
-    face_vertices: Flat<u32>,
-    face_triangles: Flat<[u32; 3]>,
+    face_vertices: Lists<u32>,
+    face_triangles: Lists<[u32; 3]>,
     /// Saved node positions (for changes that move nodes).
     positions: Vec<(u32, [f64; 3])>,
-}
-
-/// Lists of values, one after another.
-#[derive(Clone, Debug)]
-struct Flat<T> {
-    values: Vec<T>,
-    ends: Vec<usize>,
-}
-
-impl<T: Copy> Flat<T> {
-    /// The `lists`, one after another (two passes: sized, then filled).
-    fn of<'a>(lists: impl Iterator<Item = &'a [T]> + Clone) -> Self
-    where
-        T: 'a,
-    {
-        let (count, total) = lists.clone().fold((0, 0), |(c, t), list| (c + 1, t + list.len()));
-        let (mut values, mut ends) = (Vec::with_capacity(total), Vec::with_capacity(count));
-        for list in lists {
-            values.extend_from_slice(list);
-            ends.push(values.len());
-        }
-        Flat { values, ends }
-    }
-
-    fn get(&self, i: usize) -> Vec<T> {
-        let start = if i == 0 { 0 } else { self.ends[i - 1] };
-        self.values[start..self.ends[i]].to_vec()
-    }
 }
 
 impl Rollback {
@@ -118,14 +90,14 @@ impl Rollback {
             .map(|&e| e as u32)
             .collect();
         let elements = elements_saved.iter().map(|&e| &mesh.elements[e as usize]);
-        let element_faces = Flat::of(elements.clone().map(|el| &el.faces[..]));
-        let element_nodes = Flat::of(elements.map(|el| &el.nodes[..]));
-        let mut faces_saved: Vec<u32> = element_faces.values.iter().map(|r| r.face).collect();
+        let element_faces = Lists::of(elements.clone().map(|el| &el.faces[..]));
+        let element_nodes = Lists::of(elements.map(|el| &el.nodes[..]));
+        let mut faces_saved: Vec<u32> = element_faces.values().iter().map(|r| r.face).collect();
         faces_saved.par_sort_unstable();
         faces_saved.dedup();
         let faces = faces_saved.iter().map(|&f| &mesh.faces[f as usize]);
-        let face_vertices = Flat::of(faces.clone().map(|face| &face.vertices[..]));
-        let face_triangles = Flat::of(faces.map(|face| &face.triangles[..]));
+        let face_vertices = Lists::of(faces.clone().map(|face| &face.vertices[..]));
+        let face_triangles = Lists::of(faces.map(|face| &face.triangles[..]));
         Rollback {
             nodes: mesh.nodes.len(),
             faces: mesh.faces.len(),
@@ -160,10 +132,11 @@ impl Rollback {
         mesh.elements.truncate(self.elements);
         for (i, &f) in self.faces_saved.iter().enumerate() {
             mesh.faces[f as usize] =
-                Face { vertices: self.face_vertices.get(i), triangles: self.face_triangles.get(i) };
+                Face { vertices: self.face_vertices.get(i).to_vec(), triangles: self.face_triangles.get(i).to_vec() };
         }
         for (i, &e) in self.elements_saved.iter().enumerate() {
-            mesh.elements[e as usize] = Element { faces: self.element_faces.get(i), nodes: self.element_nodes.get(i) };
+            mesh.elements[e as usize] =
+                Element { faces: self.element_faces.get(i).to_vec(), nodes: self.element_nodes.get(i).to_vec() };
         }
     }
 }

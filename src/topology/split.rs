@@ -460,7 +460,7 @@ fn split_is_healthy(
     }
     loops.iter().all(|part| {
         points.clear();
-        points.extend_from_slice(part.points());
+        points.extend_from_slice(part.values());
         points.sort_unstable_by_key(|p| p.0);
         points.dedup_by_key(|p| p.0);
         let o = points[0].1;
@@ -537,7 +537,7 @@ fn face_partly_on_plane(nodes: &[[f64; 3]], dist: &[f64], v: &[u32], side: &[i8]
 /// those edges form one simple loop of at least three points. (Sorted
 /// lists, not hash maps: a cut builds thousands of caps.)
 fn cap_loop<K: Copy + Ord>(faces: &Loops<K>) -> Option<Vec<K>> {
-    let mut directed: SmallVec<[(K, K); 48]> = SmallVec::with_capacity(faces.points().len());
+    let mut directed: SmallVec<[(K, K); 48]> = SmallVec::with_capacity(faces.values().len());
     for lp in faces.iter() {
         for i in 0..lp.len() {
             directed.push((lp[i].0, lp[(i + 1) % lp.len()].0));
