@@ -28,7 +28,7 @@ const CHUNK: usize = 4096;
 
 /// Blocks per chunk of the iteration's fused passes (their sums are taken
 /// per chunk, then in order).
-const CHUNK_BLOCKS: usize = 1024;
+pub(super) const CHUNK_BLOCKS: usize = 1024;
 
 /// PCG solver (see module docs).
 ///
@@ -43,8 +43,9 @@ pub struct ConjugateGradient {
     pub max_iterations: usize,
     /// Value index of entry `(3j + r, 3j + c)` at `[j][3r + c]`.
     diagonal_blocks: Vec<[usize; 9]>,
-    /// Inverted diagonal blocks of the current matrix.
-    inverse_blocks: Vec<[f64; 9]>,
+    /// Inverted diagonal blocks of the current matrix, each symmetric and
+    /// stored as its upper triangle `[m00, m01, m02, m11, m12, m22]`.
+    inverse_blocks: Vec<[f64; 6]>,
     /// The matrix's 3x3 block structure.
     blocks: BlockStructure,
     /// The matrix values rounded to `f32`, for the products of the
@@ -56,6 +57,9 @@ pub struct ConjugateGradient {
     /// Per-chunk sums of the fused passes.
     partial: Vec<f64>,
     partial_pairs: Vec<[f64; 2]>,
+    /// Per-chunk restrictions `Pᵀ r` of the update pass (one coarse vector
+    /// per chunk; one value per chunk without a coarse level).
+    partial_restrictions: Vec<f64>,
     r: Vec<f64>,
     z: Vec<f64>,
     p: Vec<f64>,
@@ -199,6 +203,7 @@ impl ConjugateGradient {
             rounded: false,
             partial: Vec::new(),
             partial_pairs: Vec::new(),
+            partial_restrictions: Vec::new(),
             r: Vec::new(),
             z: Vec::new(),
             p: Vec::new(),
@@ -272,9 +277,10 @@ impl ConjugateGradient {
                 return Err(SolveError::NotPositiveDefinite { pivot: it, n: x.len() });
             }
             let alpha = rz / pap;
-            let inverse = blockwise.then_some(&self.inverse_blocks[..]);
-            let [rr, rz_blockwise] =
-                update(x, &mut self.r, &mut self.z, &self.p, &self.ap, inverse, alpha, &mut self.partial_pairs);
+            let smoother =
+                blockwise.then_some(Smoother { inverse: &self.inverse_blocks, coarse: self.coarse.as_ref() });
+            let partial = (&mut self.partial_pairs[..], &mut self.partial_restrictions[..]);
+            let [rr, rz_blockwise] = update(x, &mut self.r, &mut self.z, &self.p, &self.ap, smoother, alpha, partial);
             let residual = rr.sqrt();
             if !residual.is_finite() {
                 return Err(SolveError::NonFinite);
@@ -282,11 +288,10 @@ impl ConjugateGradient {
             if residual <= goal {
                 return Ok(it + 1);
             }
+            // (the coarse correction's share of r · z is known before it is
+            // prolonged, so the prolongation forms the next direction)
             let rz_new = if blockwise {
-                match self.coarse.as_mut() {
-                    Some(coarse) => rz_blockwise + coarse.correct(&self.r, &mut self.z),
-                    None => rz_blockwise,
-                }
+                rz_blockwise + self.coarse.as_mut().map_or(0.0, |c| c.solve(&self.partial_restrictions))
             } else {
                 let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
                 self.precondition(&r, &mut z)?;
@@ -295,7 +300,8 @@ impl ConjugateGradient {
             };
             let beta = rz_new / rz;
             rz = rz_new;
-            self.p.par_iter_mut().zip(&self.z).for_each(|(p, z)| *p = z + beta * *p);
+            let coarse = self.coarse.as_ref().filter(|_| blockwise);
+            next_direction(&mut self.p, &self.z, coarse, beta);
         }
         Ok(budget)
     }
@@ -321,21 +327,29 @@ impl ConjugateGradient {
             return Ok(());
         }
         z.par_chunks_mut(3).zip(r.par_chunks(3)).zip(&self.inverse_blocks).for_each(|((z, r), m)| {
-            for i in 0..3 {
-                z[i] = row_times(m, i, r);
-            }
+            z.copy_from_slice(&symmetric_times(m, r));
         });
         if let Some(coarse) = self.coarse.as_mut() {
-            coarse.correct(r, z);
+            coarse.correct(r, z, CHUNK_BLOCKS);
         }
         Ok(())
     }
 }
 
+/// The preconditioner the update pass applies: block Jacobi (the inverted
+/// diagonal blocks) and, with a coarse level, the restriction of the new
+/// residual per chunk of blocks.
+struct Smoother<'a> {
+    inverse: &'a [[f64; 6]],
+    coarse: Option<&'a CoarseSpace>,
+}
+
 /// One pass of a CG iteration over fixed chunks of blocks: `x += α p`,
-/// `r -= α A p`, and, given the inverted diagonal blocks, `z = D⁻¹ r`;
-/// returns `[r · r, r · z]` (`r · z` is 0 without `inverse`), each summed
-/// per chunk and the chunk sums in order.
+/// `r -= α A p`, and, given the smoother, `z = D⁻¹ r` and each chunk's
+/// `Pᵀ r` (into the chunk's run of `partial.1`, sized by
+/// [`ConjugateGradient::factor`]); returns `[r · r, r · z]` (`r · z` is 0
+/// without a smoother), each summed per chunk (into `partial.0`) and the
+/// chunk sums in order.
 #[allow(clippy::too_many_arguments)]
 fn update(
     x: &mut [f64],
@@ -343,16 +357,19 @@ fn update(
     z: &mut [f64],
     p: &[f64],
     ap: &[f64],
-    inverse: Option<&[[f64; 9]]>,
+    smoother: Option<Smoother<'_>>,
     alpha: f64,
-    partial: &mut [[f64; 2]],
+    partial: (&mut [[f64; 2]], &mut [f64]),
 ) -> [f64; 2] {
     let len = 3 * CHUNK_BLOCKS;
+    let (partial, restrictions) = partial;
+    let (inverse, coarse) = smoother.map_or((None, None), |s| (Some(s.inverse), s.coarse));
+    let m = restrictions.len() / partial.len().max(1);
     (x.par_chunks_mut(len).zip(r.par_chunks_mut(len)).zip(z.par_chunks_mut(len)))
         .zip(p.par_chunks(len).zip(ap.par_chunks(len)))
-        .zip(partial.par_iter_mut())
+        .zip(partial.par_iter_mut().zip(restrictions.par_chunks_mut(m.max(1))))
         .enumerate()
-        .for_each(|(c, ((((x, r), z), (p, ap)), part))| {
+        .for_each(|(c, ((((x, r), z), (p, ap)), (part, restricted)))| {
             let (mut rr, mut rz) = (0.0, 0.0);
             for (q, (((x, r), z), (p, ap))) in x
                 .chunks_exact_mut(3)
@@ -367,16 +384,43 @@ fn update(
                 }
                 rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
                 if let Some(inverse) = inverse {
-                    let m = &inverse[c * CHUNK_BLOCKS + q];
-                    for i in 0..3 {
-                        z[i] = row_times(m, i, r);
-                    }
+                    z.copy_from_slice(&symmetric_times(&inverse[c * CHUNK_BLOCKS + q], r));
                     rz += r[0] * z[0] + r[1] * z[1] + r[2] * z[2];
                 }
+            }
+            if let Some(coarse) = coarse {
+                coarse.restrict(c * CHUNK_BLOCKS, r, restricted);
             }
             *part = [rr, rz];
         });
     partial.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]])
+}
+
+/// The next search direction `p = z + P e + β p` per chunk of blocks: `z`
+/// block Jacobi's share of the preconditioned residual, `P e` the coarse
+/// level's (its last solve), when there is one.
+fn next_direction(p: &mut [f64], z: &[f64], coarse: Option<&CoarseSpace>, beta: f64) {
+    let len = 3 * CHUNK_BLOCKS;
+    p.par_chunks_mut(len).zip(z.par_chunks(len)).enumerate().for_each(|(c, (p, z))| match coarse {
+        Some(coarse) => {
+            for (q, (p, z)) in p.chunks_exact_mut(3).zip(z.chunks_exact(3)).enumerate() {
+                let add = coarse.prolonged(c * CHUNK_BLOCKS + q);
+                (0..3).for_each(|d| p[d] = (z[d] + add[d]) + beta * p[d]);
+            }
+        }
+        None => p.iter_mut().zip(z).for_each(|(p, z)| *p = z + beta * *p),
+    });
+}
+
+/// The symmetric 3x3 matrix `m` (upper triangle `[m00, m01, m02, m11, m12,
+/// m22]`) times the 3-vector `v`.
+#[inline(always)]
+fn symmetric_times(m: &[f64; 6], v: &[f64]) -> [f64; 3] {
+    [
+        m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
+        m[1] * v[0] + m[3] * v[1] + m[4] * v[2],
+        m[2] * v[0] + m[4] * v[1] + m[5] * v[2],
+    ]
 }
 
 /// Row `i` of the row-major 3x3 matrix `m` times the 3-vector `v`.
@@ -471,7 +515,7 @@ impl LinearSolver for ConjugateGradient {
         }
         self.diagonal_blocks.clear();
         self.diagonal_blocks.par_extend((0..n / 3).into_par_iter().map(|j| slot(j).expect("checked above")));
-        self.inverse_blocks.resize(n / 3, [0.0; 9]);
+        self.inverse_blocks.resize(n / 3, [0.0; 6]);
         // (the rotated rest-state factor replaces block Jacobi and its
         // coarse level, and takes the new reference before a solve)
         let limit = aggregate_limit(pattern.row_idx().len());
@@ -513,7 +557,8 @@ impl LinearSolver for ConjugateGradient {
         }
         self.rounded = rounded;
         self.inverse_blocks.par_iter_mut().zip(&self.diagonal_blocks).for_each(|(inv, slots)| {
-            *inv = invert3(slots.map(|s| val[s]));
+            let m = invert3(slots.map(|s| val[s]));
+            *inv = [m[0], m[1], m[2], m[4], m[5], m[8]];
         });
         if let Some(coarse) = self.coarse.as_mut() {
             // (from the values the iteration reads: the preconditioner
@@ -523,6 +568,10 @@ impl LinearSolver for ConjugateGradient {
                 false => coarse.factor(&self.blocks, val)?,
             }
         }
+        // one coarse vector per chunk of the update pass (one value per
+        // chunk without a coarse level)
+        let m = self.coarse.as_ref().map_or(1, |c| c.restricted_len().max(1));
+        self.partial_restrictions.resize(self.partial_pairs.len() * m, 0.0);
         Ok(())
     }
 

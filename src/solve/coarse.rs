@@ -42,9 +42,6 @@ pub(super) fn aggregate_limit(stored: usize) -> usize {
 /// Marks a vertex without aggregate.
 const FREE: u32 = u32::MAX;
 
-/// Blocks per parallel task of the restriction and the prolongation.
-const TASK_BLOCKS: usize = 4096;
-
 /// Block columns below which the run sums are formed without splitting.
 const RUN_TASK_COLUMNS: usize = 512;
 
@@ -74,7 +71,8 @@ pub(super) struct CoarseSpace {
     /// `A_c` (column-major, `k m x k m` for `m` aggregates of `k` modes),
     /// overwritten by its lower Cholesky factor.
     factor: Vec<f64>,
-    /// `Pᵀ r` per task of [`TASK_BLOCKS`] blocks, then summed in order.
+    /// `Pᵀ r` per chunk of blocks of [`CoarseSpace::correct`], then summed
+    /// in order.
     partial: Vec<f64>,
     /// `Pᵀ r` and `A_c⁻¹ Pᵀ r`.
     restricted: Vec<f64>,
@@ -319,39 +317,50 @@ impl CoarseSpace {
         }
     }
 
-    /// `z += P A_c⁻¹ Pᵀ r`; returns `r · P A_c⁻¹ Pᵀ r`, the correction's
-    /// share of `r · z`.
-    pub fn correct(&mut self, r: &[f64], z: &mut [f64]) -> f64 {
+    /// Length of a restricted vector `Pᵀ r`: modes times aggregates.
+    pub fn restricted_len(&self) -> usize {
+        self.modes() * self.aggregates()
+    }
+
+    /// `partial = Pᵀ r` of the blocks `first..first + r.len() / 3` (`r`
+    /// their entries), summed in block order; a run of blocks in one
+    /// aggregate is summed in registers.
+    pub fn restrict(&self, first: usize, r: &[f64], partial: &mut [f64]) {
         let k = self.modes();
-        let m = k * self.aggregates();
-        // Pᵀ r: per task of blocks in order, then the tasks in order
-        let (of, offsets) = (&self.of, &self.offsets);
-        self.partial.resize(r.len().div_ceil(3 * TASK_BLOCKS) * m, 0.0);
-        self.partial.par_chunks_mut(m).zip(r.par_chunks(3 * TASK_BLOCKS)).enumerate().for_each(|(t, (partial, r))| {
-            partial.fill(0.0);
-            // runs of blocks in one aggregate are summed in registers
-            let mut add = |a: usize, sum: &[f64; 6]| {
-                partial[k * a..k * a + k].iter_mut().zip(sum).for_each(|(p, s)| *p += s);
-            };
-            let (mut current, mut sum) = (of[t * TASK_BLOCKS] as usize, [0.0; 6]);
-            for (q, r) in r.chunks_exact(3).enumerate() {
-                let i = t * TASK_BLOCKS + q;
-                let a = of[i] as usize;
-                if a != current {
-                    add(current, &sum);
-                    (current, sum) = (a, [0.0; 6]);
-                }
-                (0..3).for_each(|d| sum[d] += r[d]);
-                if let Some(&d) = offsets.get(i) {
-                    let w = cross(d, [r[0], r[1], r[2]]);
-                    (0..3).for_each(|e| sum[3 + e] += w[e]);
-                }
+        partial.fill(0.0);
+        let mut add = |a: usize, sum: &[f64; 6]| {
+            partial[k * a..k * a + k].iter_mut().zip(sum).for_each(|(p, s)| *p += s);
+        };
+        let Some(&start) = self.of.get(first) else { return };
+        let (mut current, mut sum) = (start as usize, [0.0; 6]);
+        for (q, r) in r.chunks_exact(3).enumerate() {
+            let i = first + q;
+            let a = self.of[i] as usize;
+            if a != current {
+                add(current, &sum);
+                (current, sum) = (a, [0.0; 6]);
             }
-            add(current, &sum);
-        });
+            (0..3).for_each(|d| sum[d] += r[d]);
+            if let Some(&d) = self.offsets.get(i) {
+                let w = cross(d, [r[0], r[1], r[2]]);
+                (0..3).for_each(|e| sum[3 + e] += w[e]);
+            }
+        }
+        add(current, &sum);
+    }
+
+    /// Sums the partial restrictions (`partials`, one [`restricted_len`]
+    /// run per chunk of blocks, in order) to `Pᵀ r` and solves `A_c e =
+    /// Pᵀ r` for the correction `e` that [`prolonged`] reads; returns
+    /// `r · P e`, the correction's share of `r · z`.
+    ///
+    /// [`restricted_len`]: CoarseSpace::restricted_len
+    /// [`prolonged`]: CoarseSpace::prolonged
+    pub fn solve(&mut self, partials: &[f64]) -> f64 {
+        let m = self.restricted_len();
         self.restricted.clear();
         self.restricted.resize(m, 0.0);
-        for partial in self.partial.chunks_exact(m) {
+        for partial in partials.chunks_exact(m) {
             self.restricted.iter_mut().zip(partial).for_each(|(s, p)| *s += p);
         }
         self.correction.clone_from(&self.restricted);
@@ -362,19 +371,43 @@ impl CoarseSpace {
             Par::Seq,
             MemStack::new(&mut []),
         );
-        let correction = &self.correction;
-        z.par_chunks_mut(3 * TASK_BLOCKS).zip(of.par_chunks(TASK_BLOCKS)).enumerate().for_each(|(t, (z, of))| {
-            for (q, (z, &a)) in z.chunks_exact_mut(3).zip(of).enumerate() {
-                let a = k * a as usize;
-                let mut add = [correction[a], correction[a + 1], correction[a + 2]];
-                if let Some(&d) = offsets.get(t * TASK_BLOCKS + q) {
-                    let w = cross([correction[a + 3], correction[a + 4], correction[a + 5]], d);
-                    (0..3).for_each(|e| add[e] += w[e]);
-                }
+        self.restricted.iter().zip(&self.correction).map(|(r, e)| r * e).sum()
+    }
+
+    /// `(P e)_i`, the correction of the last [`CoarseSpace::solve`] at
+    /// block `i`: its aggregate's translation plus, with positions, its
+    /// rotation `ω × d_i`.
+    #[inline(always)]
+    pub fn prolonged(&self, i: usize) -> [f64; 3] {
+        let a = self.modes() * self.of[i] as usize;
+        let e = &self.correction;
+        let mut add = [e[a], e[a + 1], e[a + 2]];
+        if let Some(&d) = self.offsets.get(i) {
+            let w = cross([e[a + 3], e[a + 4], e[a + 5]], d);
+            (0..3).for_each(|c| add[c] += w[c]);
+        }
+        add
+    }
+
+    /// `z += P A_c⁻¹ Pᵀ r`, restricting per chunk of `chunk_blocks` blocks
+    /// in parallel; returns `r · P A_c⁻¹ Pᵀ r`, the correction's share of
+    /// `r · z`.
+    pub fn correct(&mut self, r: &[f64], z: &mut [f64], chunk_blocks: usize) -> f64 {
+        let m = self.restricted_len();
+        let mut partials = std::mem::take(&mut self.partial);
+        partials.resize(r.len().div_ceil(3 * chunk_blocks) * m, 0.0);
+        partials.par_chunks_mut(m).zip(r.par_chunks(3 * chunk_blocks)).enumerate().for_each(|(t, (partial, r))| {
+            self.restrict(t * chunk_blocks, r, partial);
+        });
+        let share = self.solve(&partials);
+        self.partial = partials;
+        z.par_chunks_mut(3 * chunk_blocks).enumerate().for_each(|(t, z)| {
+            for (q, z) in z.chunks_exact_mut(3).enumerate() {
+                let add = self.prolonged(t * chunk_blocks + q);
                 (0..3).for_each(|e| z[e] += add[e]);
             }
         });
-        self.restricted.iter().zip(correction).map(|(r, e)| r * e).sum()
+        share
     }
 }
 
@@ -612,16 +645,23 @@ mod tests {
             let r = faer::Mat::<f64>::from_fn(n, 1, |i, _| (i as f64 * 0.7).sin());
             let expected = &p * ac.llt(faer::Side::Lower).unwrap().solve(p.transpose() * &r);
             let base: Vec<f64> = (0..n).map(|i| 0.25 * (i as f64).cos()).collect();
-            let mut z = base.clone();
             let r_slice: Vec<f64> = (0..n).map(|i| r[(i, 0)]).collect();
-            let rz = coarse.correct(&r_slice, &mut z);
-            for i in 0..n {
-                let got = z[i] - base[i];
-                let want = expected[(i, 0)];
-                assert!((got - want).abs() <= 1e-12 * (1.0 + want.abs()), "rotations {rotations}, entry {i}");
+            // restricted in one chunk, and in chunks of 5 blocks (runs of an
+            // aggregate cut by chunk ends)
+            for chunk_blocks in [1024, 5] {
+                let mut z = base.clone();
+                let rz = coarse.correct(&r_slice, &mut z, chunk_blocks);
+                for i in 0..n {
+                    let got = z[i] - base[i];
+                    let want = expected[(i, 0)];
+                    assert!(
+                        (got - want).abs() <= 1e-12 * (1.0 + want.abs()),
+                        "rotations {rotations}, chunks of {chunk_blocks}, entry {i}"
+                    );
+                }
+                let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
+                assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
             }
-            let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
-            assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
         }
     }
 
@@ -638,14 +678,14 @@ mod tests {
             coarse.factor(&blocks, &values).unwrap();
             let r: Vec<f64> = (0..3 * nx).map(|i| 1.0 + i as f64).collect();
             let mut z = vec![0.0; 3 * nx];
-            coarse.correct(&r, &mut z);
+            coarse.correct(&r, &mut z, 1024);
             assert!(z.iter().all(|v| v.is_finite()), "{nx} blocks on a line: {z:?}");
             if nx == 1 {
                 // a lone block's correction is its translations' alone
                 let mut translations = CoarseSpace::new(&blocks, 1);
                 translations.factor(&blocks, &values).unwrap();
                 let mut expected = vec![0.0; 3];
-                translations.correct(&r, &mut expected);
+                translations.correct(&r, &mut expected, 1024);
                 for (a, b) in z.iter().zip(&expected) {
                     assert!((a - b).abs() <= 1e-12 * b.abs(), "a lone block: {z:?} vs {expected:?}");
                 }
