@@ -1,8 +1,7 @@
 //! Preconditioned conjugate gradients, warm-started from the caller's
-//! guess, with an additive three-level preconditioner (`coarse.rs`): 3x3
-//! block Jacobi, block Jacobi on the rigid motions of small node
-//! aggregates, and the exact correction of the rigid motions of a few
-//! large ones, `z = D⁻¹ r + Σ_a P_a A_a⁻¹ P_aᵀ r + P A_c⁻¹ Pᵀ r`.
+//! guess, with a two-level preconditioner: 3x3 block Jacobi plus the
+//! coarse correction of the rigid motions of node aggregates
+//! (`coarse.rs`), `z = D⁻¹ r + P A_c⁻¹ Pᵀ r`.
 //!
 //! The matrix stores both triangles and is symmetric, so `y = A x` is
 //! computed row by row as `y_i = (column i) · x`, in parallel without
@@ -11,19 +10,17 @@
 //! the values rounded to `f32`: this memory-bound product reads a quarter
 //! of the bytes of a scalar `f64` one. The iteration's vectors stay `f64`,
 //! and the residual it must meet is taken with the `f64` values (see
-//! [`ConjugateGradient::solve`]). Per iteration, the product forms `p · A
-//! p`; one pass updates `x` and `r`, applies block Jacobi, restricts `r`
-//! to the coarse level and forms both dot products; the middle level
-//! restricts and solves per aggregate; one pass forms the next direction
-//! with both levels' corrections. Sums run over fixed chunks (or
-//! aggregates) in parallel and the partial sums in order, so the iterates
-//! are bitwise independent of the thread count.
+//! [`ConjugateGradient::solve`]). One pass per iteration updates `x` and
+//! `r`, applies the preconditioner and forms both dot products; the product
+//! forms `p · A p`. Sums run over fixed chunks in parallel and the chunk
+//! sums in order, so the iterates are bitwise independent of the thread
+//! count.
 
 use cleave_kernels::spmv::{block_products, BlockColumns, Value};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
-use super::coarse::{aggregate_limit, CoarseSpace, LocalSpace};
+use super::coarse::{aggregate_limit, CoarseSpace};
 use super::{Cholesky, LinearSolver, SolveError, SolveStats};
 
 /// Chunk length of the deterministic reductions.
@@ -35,12 +32,10 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 
 /// PCG solver (see module docs).
 ///
-/// On the steps of `cleave bench` (bunny_100k, 53k unknowns), falling
-/// freely, the coarse level takes the iterations from 86 to 26 per step
+/// On the step of `cleave bench` (bunny_100k falling onto a plane, 53k
+/// unknowns), the coarse level takes the iterations from 86 to 26 per step
 /// at a relative residual of 1e-6 and from 143 to 66 at 1e-8 (29 and 79
-/// with the aggregates' translations alone), and the middle level to 24
-/// and 51; clamped at its base (the body deforms), the middle level takes
-/// them from 102 to 72 at 1e-6 and from 163 to 114 at 1e-8.
+/// with the aggregates' translations alone).
 pub struct ConjugateGradient {
     /// Relative residual `|b - A x| / |b|` to reach.
     pub tolerance: f64,
@@ -75,8 +70,6 @@ pub struct ConjugateGradient {
     rest: Option<RestPreconditioner>,
     /// The coarse level added to block Jacobi, when chosen.
     coarse: Option<CoarseSpace>,
-    /// The middle level that comes with the coarse level.
-    local: Option<LocalSpace>,
 }
 
 /// The 3x3 block structure of a matrix in the layout of
@@ -218,7 +211,6 @@ impl ConjugateGradient {
             rotated: Vec::new(),
             rest: None,
             coarse: None,
-            local: None,
         }
     }
 
@@ -299,9 +291,7 @@ impl ConjugateGradient {
             // (the coarse correction's share of r · z is known before it is
             // prolonged, so the prolongation forms the next direction)
             let rz_new = if blockwise {
-                let coarse_share = self.coarse.as_mut().map_or(0.0, |c| c.solve(&self.partial_restrictions));
-                let local_share = self.local.as_mut().map_or(0.0, |l| l.solve(&self.r));
-                rz_blockwise + coarse_share + local_share
+                rz_blockwise + self.coarse.as_mut().map_or(0.0, |c| c.solve(&self.partial_restrictions))
             } else {
                 let (r, mut z) = (std::mem::take(&mut self.r), std::mem::take(&mut self.z));
                 self.precondition(&r, &mut z)?;
@@ -310,8 +300,8 @@ impl ConjugateGradient {
             };
             let beta = rz_new / rz;
             rz = rz_new;
-            let levels = blockwise.then_some((self.coarse.as_ref(), self.local.as_ref()));
-            next_direction(&mut self.p, &self.z, levels.unwrap_or_default(), beta);
+            let coarse = self.coarse.as_ref().filter(|_| blockwise);
+            next_direction(&mut self.p, &self.z, coarse, beta);
         }
         Ok(budget)
     }
@@ -341,9 +331,6 @@ impl ConjugateGradient {
         });
         if let Some(coarse) = self.coarse.as_mut() {
             coarse.correct(r, z, CHUNK_BLOCKS);
-        }
-        if let Some(local) = self.local.as_mut() {
-            local.correct(r, z);
         }
         Ok(())
     }
@@ -409,22 +396,19 @@ fn update(
     partial.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]])
 }
 
-/// The next search direction `p = z + P e + P_l e_l + β p` per chunk of
-/// blocks: `z` block Jacobi's share of the preconditioned residual, `P e`
-/// the coarse level's and `P_l e_l` the middle level's (their last solves),
-/// where there are.
-fn next_direction(p: &mut [f64], z: &[f64], levels: (Option<&CoarseSpace>, Option<&LocalSpace>), beta: f64) {
+/// The next search direction `p = z + P e + β p` per chunk of blocks: `z`
+/// block Jacobi's share of the preconditioned residual, `P e` the coarse
+/// level's (its last solve), when there is one.
+fn next_direction(p: &mut [f64], z: &[f64], coarse: Option<&CoarseSpace>, beta: f64) {
     let len = 3 * CHUNK_BLOCKS;
-    p.par_chunks_mut(len).zip(z.par_chunks(len)).enumerate().for_each(|(c, (p, z))| match levels {
-        (None, None) => p.iter_mut().zip(z).for_each(|(p, z)| *p = z + beta * *p),
-        (coarse, local) => {
+    p.par_chunks_mut(len).zip(z.par_chunks(len)).enumerate().for_each(|(c, (p, z))| match coarse {
+        Some(coarse) => {
             for (q, (p, z)) in p.chunks_exact_mut(3).zip(z.chunks_exact(3)).enumerate() {
-                let i = c * CHUNK_BLOCKS + q;
-                let add = coarse.map_or([0.0; 3], |coarse| coarse.prolonged(i));
-                let add_local = local.map_or([0.0; 3], |local| local.prolonged(i));
-                (0..3).for_each(|d| p[d] = (z[d] + add[d] + add_local[d]) + beta * p[d]);
+                let add = coarse.prolonged(c * CHUNK_BLOCKS + q);
+                (0..3).for_each(|d| p[d] = (z[d] + add[d]) + beta * p[d]);
             }
         }
+        None => p.iter_mut().zip(z).for_each(|(p, z)| *p = z + beta * *p),
     });
 }
 
@@ -535,14 +519,8 @@ impl LinearSolver for ConjugateGradient {
         // (the rotated rest-state factor replaces block Jacobi and its
         // coarse level, and takes the new reference before a solve)
         let limit = aggregate_limit(pattern.row_idx().len());
-        let (old, old_local) = (self.coarse.take().unwrap_or_default(), self.local.take().unwrap_or_default());
-        (self.coarse, self.local) = match self.rest {
-            None => {
-                let (coarse, local) = CoarseSpace::renew(blocks, limit, old, old_local);
-                (Some(coarse), Some(local))
-            }
-            Some(_) => (None, None),
-        };
+        let old = self.coarse.take().unwrap_or_default();
+        self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, old));
         if let Some(rest) = self.rest.as_mut() {
             rest.ready = false;
         }
@@ -586,8 +564,8 @@ impl LinearSolver for ConjugateGradient {
             // (from the values the iteration reads: the preconditioner
             // need not be exact, and they are half the bytes)
             match self.rounded {
-                true => coarse.factor(&self.blocks, &self.values32, self.local.as_mut())?,
-                false => coarse.factor(&self.blocks, val, self.local.as_mut())?,
+                true => coarse.factor(&self.blocks, &self.values32)?,
+                false => coarse.factor(&self.blocks, val)?,
             }
         }
         // one coarse vector per chunk of the update pass (one value per
@@ -665,9 +643,6 @@ impl LinearSolver for ConjugateGradient {
     fn set_positions(&mut self, positions: &[[f64; 3]]) {
         if let Some(coarse) = self.coarse.as_mut() {
             coarse.set_positions(positions);
-        }
-        if let Some(local) = self.local.as_mut() {
-            local.set_positions(positions);
         }
     }
 

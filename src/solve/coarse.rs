@@ -1,5 +1,5 @@
-//! The coarse and the middle level of the CG preconditioner: the rigid
-//! motions of aggregates of blocks.
+//! The coarse level of a two-level preconditioner: the rigid motions of
+//! aggregates of blocks.
 //!
 //! Blocks (nodes) are grouped into aggregates by greedy aggregation of the
 //! matrix graph, repeated on the graph of the aggregates until at most a
@@ -13,12 +13,6 @@
 //! block Jacobi reduces slowly: motions of whole regions, which only the
 //! mass resists while block Jacobi divides by the much larger stiffness
 //! diagonal.
-//!
-//! The middle level ([`LocalSpace`]) takes the aggregates of the first
-//! round of aggregation, about a node and its neighbours, and adds
-//! `Σ_a P_a (P_aᵀ A P_a)⁻¹ P_aᵀ r`: each small aggregate's rigid motions
-//! solved alone (block Jacobi on them), for the error between the scale of
-//! a node and that of the coarse aggregates.
 //!
 //! Aggregates follow the matrix graph, so no aggregate spans two pieces of
 //! a cut body. Every sum runs in a fixed order, so the correction has the
@@ -91,30 +85,21 @@ impl CoarseSpace {
     /// `max_aggregates` remain (or a round merges nothing).
     #[cfg(test)]
     pub fn new(blocks: &BlockStructure, max_aggregates: usize) -> Self {
-        Self::renew(blocks, max_aggregates, Self::default(), LocalSpace::default()).0
+        Self::renew(blocks, max_aggregates, Self::default())
     }
 
     /// Aggregates of the blocks of `blocks`, coarsened until at most
     /// `max_aggregates` remain (or a round merges nothing), in the arrays
     /// of `old` (the space of the pattern before a topology change, or an
     /// empty one): a space per cut reuses its predecessor's memory instead
-    /// of faulting in fresh pages for its runs. With it, the middle level:
-    /// the aggregates of the first round, in the arrays of `old_local`.
-    pub fn renew(
-        blocks: &BlockStructure,
-        max_aggregates: usize,
-        old: Self,
-        old_local: LocalSpace,
-    ) -> (Self, LocalSpace) {
+    /// of faulting in fresh pages for its runs.
+    pub fn renew(blocks: &BlockStructure, max_aggregates: usize, old: Self) -> Self {
         let n = blocks.ptr.len() - 1;
-        let first = aggregate(&blocks.ptr, &blocks.rows);
-        let local = LocalSpace::from_aggregates(&first.0, first.1, old_local);
-        let mut first = Some(first);
         let mut of: Vec<u32> = (0..n as u32).collect();
         let (mut count, mut graph) = (n, None::<(Vec<u32>, Vec<u32>)>);
         while count > max_aggregates.max(1) {
             let (ptr, adj) = graph.as_ref().map_or((&blocks.ptr[..], &blocks.rows[..]), |(p, a)| (&p[..], &a[..]));
-            let (round, merged) = first.take().unwrap_or_else(|| aggregate(ptr, adj));
+            let (round, merged) = aggregate(ptr, adj);
             if merged == count {
                 break;
             }
@@ -159,7 +144,7 @@ impl CoarseSpace {
         run_aggregate.clear();
         listed.iter().for_each(|(_, aggregates)| run_aggregate.extend_from_slice(aggregates));
         run_sums.resize(run_aggregate.len(), [0.0; 18]);
-        let coarse = CoarseSpace {
+        CoarseSpace {
             of,
             ptr,
             members,
@@ -171,8 +156,7 @@ impl CoarseSpace {
             restricted: old.restricted,
             correction: old.correction,
             ..Default::default()
-        };
-        (coarse, local)
+        }
     }
 
     /// Number of aggregates.
@@ -197,13 +181,24 @@ impl CoarseSpace {
             self.offsets.clear();
             return;
         }
-        centroid_offsets(positions, &self.ptr, &self.members, &mut self.offsets);
+        self.offsets.resize(positions.len(), [0.0; 3]);
+        let (ptr, members) = (&self.ptr, &self.members);
+        for a in 0..ptr.len() - 1 {
+            let blocks = &members[ptr[a] as usize..ptr[a + 1] as usize];
+            let mut c = [0.0; 3];
+            for &i in blocks {
+                (0..3).for_each(|d| c[d] += positions[i as usize][d]);
+            }
+            let n = blocks.len() as f64;
+            for &i in blocks {
+                let x = positions[i as usize];
+                self.offsets[i as usize] = std::array::from_fn(|d| x[d] - c[d] / n);
+            }
+        }
     }
 
     /// Assembles `A_c = Pᵀ A P` from the values on `blocks` (`f64`, or the
-    /// `f32` copy the iteration reads) and factors it; in the same pass
-    /// over the values, the middle level's (`local`, see
-    /// [`LocalSpace::invert`]).
+    /// `f32` copy the iteration reads) and factors it.
     /// The run sums stream through the values in their order; each coarse
     /// column block `b` then adds, for each member `j` and each run of
     /// aggregate `a` in its column, `[T  T S_j; U  U S_j]` to `A_c[a, b]`
@@ -212,23 +207,12 @@ impl CoarseSpace {
     /// stiffness: every rotation's diagonal gets `1e-12` of the largest
     /// diagonal entry, so the factor exists and such a mode, whose `P`
     /// column is zero, corrects nothing.
-    pub fn factor<T: Value>(
-        &mut self,
-        blocks: &BlockStructure,
-        values: &[T],
-        mut local: Option<&mut LocalSpace>,
-    ) -> Result<(), SolveError> {
+    pub fn factor<T: Value>(&mut self, blocks: &BlockStructure, values: &[T]) -> Result<(), SolveError> {
         let (k, rotations) = (self.modes(), !self.offsets.is_empty());
         let m = k * self.aggregates();
         let mut sums = std::mem::take(&mut self.run_sums);
-        let mut column_sums = local.as_mut().map(|l| std::mem::take(&mut l.column_sums)).unwrap_or_default();
-        let local_sums = local.as_ref().map(|l| LocalSums { of: &l.of, offsets: &l.offsets, out: &mut column_sums });
-        self.sum_runs(blocks, values, 0..blocks.ptr.len() - 1, &mut sums, local_sums);
+        self.sum_runs(blocks, values, 0..blocks.ptr.len() - 1, &mut sums);
         self.run_sums = sums;
-        if let Some(local) = local {
-            local.column_sums = column_sums;
-            local.invert()?;
-        }
         let mut dense = std::mem::take(&mut self.factor);
         dense.resize(m * m, 0.0);
         dense.par_chunks_mut(k * m).enumerate().for_each(|(b, cols)| {
@@ -237,7 +221,25 @@ impl CoarseSpace {
                 let runs = self.run_ptr[j as usize] as usize..self.run_ptr[j as usize + 1] as usize;
                 let dj = if rotations { self.offsets[j as usize] } else { [0.0; 3] };
                 for (sum, &a) in self.run_sums[runs.clone()].iter().zip(&self.run_aggregate[runs]) {
-                    add_run(cols, m, k * a as usize, sum, rotations.then_some(dj));
+                    let a = k * a as usize;
+                    for c in 0..3 {
+                        let col = &mut cols[c * m..(c + 1) * m];
+                        (0..3).for_each(|r| col[a + r] += sum[3 * c + r]);
+                        if rotations {
+                            (0..3).for_each(|r| col[a + 3 + r] += sum[9 + 3 * c + r]);
+                        }
+                    }
+                    if rotations {
+                        // column c of M S_j is M (e_c × d_j)
+                        for c in 0..3 {
+                            let e = cross(unit(c), dj);
+                            let col = &mut cols[(3 + c) * m..(4 + c) * m];
+                            for r in 0..3 {
+                                col[a + r] += (0..3).map(|q| sum[3 * q + r] * e[q]).sum::<f64>();
+                                col[a + 3 + r] += (0..3).map(|q| sum[9 + 3 * q + r] * e[q]).sum::<f64>();
+                            }
+                        }
+                    }
                 }
             }
         });
@@ -278,26 +280,18 @@ impl CoarseSpace {
         values: &[T],
         columns: std::ops::Range<usize>,
         out: &mut [[f64; 18]],
-        mut local: Option<LocalSums<'_>>,
     ) {
         if columns.len() > RUN_TASK_COLUMNS {
             let mid = columns.start + columns.len() / 2;
             let split = (self.run_ptr[mid] - self.run_ptr[columns.start]) as usize;
             let (left, right) = out.split_at_mut(split);
-            let (local_left, local_right) = match local {
-                Some(sums) => {
-                    let (l, r) = sums.split_at(mid - columns.start);
-                    (Some(l), Some(r))
-                }
-                None => (None, None),
-            };
             rayon::join(
-                || self.sum_runs(blocks, values, columns.start..mid, left, local_left),
-                || self.sum_runs(blocks, values, mid..columns.end, right, local_right),
+                || self.sum_runs(blocks, values, columns.start..mid, left),
+                || self.sum_runs(blocks, values, mid..columns.end, right),
             );
             return;
         }
-        let (first_run, first_column) = (self.run_ptr[columns.start] as usize, columns.start);
+        let first_run = self.run_ptr[columns.start] as usize;
         for j in columns {
             let rows = &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
             let stride = 3 * rows.len();
@@ -306,19 +300,17 @@ impl CoarseSpace {
             let aggregates = &self.run_aggregate[runs.clone()];
             let sums = &mut out[runs.start - first_run..runs.end - first_run];
             sums.fill([0.0; 18]);
-            let mut local_sum = local.as_mut().map(|l| {
-                let sum = &mut l.out[j - first_column];
-                *sum = [0.0; 18];
-                (l.of, l.offsets, l.of[j], sum)
-            });
             for (q, &row) in rows.iter().enumerate() {
                 let a = self.of[row as usize];
                 let k = aggregates.iter().position(|&b| b == a).expect("every row's aggregate has its run");
+                let sum = &mut sums[k];
                 let block: [f64; 9] = std::array::from_fn(|e| column[(e / 3) * stride + 3 * q + e % 3].to_f64());
-                add_block(&mut sums[k], &block, self.offsets.get(row as usize));
-                if let Some((of, offsets, own, sum)) = local_sum.as_mut() {
-                    if of[row as usize] == *own {
-                        add_block(sum, &block, offsets.get(row as usize));
+                (0..9).for_each(|e| sum[e] += block[e]);
+                if let Some(d) = self.offsets.get(row as usize) {
+                    // S_iᵀ = [d_i]×: column c of S_iᵀ A_ij is d_i × (column c of A_ij)
+                    for c in 0..3 {
+                        let v = cross(*d, [block[3 * c], block[3 * c + 1], block[3 * c + 2]]);
+                        (0..3).for_each(|r| sum[9 + 3 * c + r] += v[r]);
                     }
                 }
             }
@@ -348,7 +340,11 @@ impl CoarseSpace {
                 add(current, &sum);
                 (current, sum) = (a, [0.0; 6]);
             }
-            add_restricted(&mut sum, r, self.offsets.get(i));
+            (0..3).for_each(|d| sum[d] += r[d]);
+            if let Some(&d) = self.offsets.get(i) {
+                let w = cross(d, [r[0], r[1], r[2]]);
+                (0..3).for_each(|e| sum[3 + e] += w[e]);
+            }
         }
         add(current, &sum);
     }
@@ -384,7 +380,13 @@ impl CoarseSpace {
     #[inline(always)]
     pub fn prolonged(&self, i: usize) -> [f64; 3] {
         let a = self.modes() * self.of[i] as usize;
-        rigid_motion(&self.correction[a..], self.offsets.get(i))
+        let e = &self.correction;
+        let mut add = [e[a], e[a + 1], e[a + 2]];
+        if let Some(&d) = self.offsets.get(i) {
+            let w = cross([e[a + 3], e[a + 4], e[a + 5]], d);
+            (0..3).for_each(|c| add[c] += w[c]);
+        }
+        add
     }
 
     /// `z += P A_c⁻¹ Pᵀ r`, restricting per chunk of `chunk_blocks` blocks
@@ -406,283 +408,6 @@ impl CoarseSpace {
             }
         });
         share
-    }
-}
-
-/// Where [`CoarseSpace::sum_runs`] also sums the middle level's blocks:
-/// its aggregates and offsets, and the sums of the columns being summed.
-struct LocalSums<'a> {
-    of: &'a [u32],
-    offsets: &'a [[f64; 3]],
-    out: &'a mut [[f64; 18]],
-}
-
-impl<'a> LocalSums<'a> {
-    /// The sums of the first `columns` columns and of the rest.
-    fn split_at(self, columns: usize) -> (Self, Self) {
-        let (left, right) = self.out.split_at_mut(columns);
-        (LocalSums { out: left, ..self }, LocalSums { out: right, ..self })
-    }
-}
-
-/// Adds block `A_ij` to its run's sums (`[3 c + r]`: `Σ A_ij`; `[9 + 3 c +
-/// r]`: `Σ S_iᵀ A_ij`, with `d_i`, block `i`'s position from its
-/// aggregate's centroid, when the blocks have positions).
-#[inline(always)]
-fn add_block(sum: &mut [f64; 18], block: &[f64; 9], d: Option<&[f64; 3]>) {
-    (0..9).for_each(|e| sum[e] += block[e]);
-    if let Some(d) = d {
-        // S_iᵀ = [d_i]×: column c of S_iᵀ A_ij is d_i × (column c of A_ij)
-        for c in 0..3 {
-            let v = cross(*d, [block[3 * c], block[3 * c + 1], block[3 * c + 2]]);
-            (0..3).for_each(|r| sum[9 + 3 * c + r] += v[r]);
-        }
-    }
-}
-
-/// Adds a run's share `[T  T S_j; U  U S_j]` (`T = Σ A_ij`, `U = Σ S_iᵀ
-/// A_ij`, [`add_block`]'s sums) to the coarse columns of block `j` (`cols`:
-/// its modes' columns, `stride` values apart), at the rows of aggregate
-/// modes from `row` on; `S_j`'s part with `d_j` alone.
-#[inline(always)]
-fn add_run(cols: &mut [f64], stride: usize, row: usize, sum: &[f64; 18], d_j: Option<[f64; 3]>) {
-    for c in 0..3 {
-        let col = &mut cols[c * stride..];
-        (0..3).for_each(|r| col[row + r] += sum[3 * c + r]);
-        if d_j.is_some() {
-            (0..3).for_each(|r| col[row + 3 + r] += sum[9 + 3 * c + r]);
-        }
-    }
-    if let Some(d_j) = d_j {
-        // column c of M S_j is M (e_c × d_j)
-        for c in 0..3 {
-            let e = cross(unit(c), d_j);
-            let col = &mut cols[(3 + c) * stride..];
-            for r in 0..3 {
-                col[row + r] += (0..3).map(|q| sum[3 * q + r] * e[q]).sum::<f64>();
-                col[row + 3 + r] += (0..3).map(|q| sum[9 + 3 * q + r] * e[q]).sum::<f64>();
-            }
-        }
-    }
-}
-
-/// Adds block `i`'s share `P_iᵀ r_i = [r_i; d_i × r_i]` of a restriction
-/// to `sum` (the translations' alone without `d_i`).
-#[inline(always)]
-fn add_restricted(sum: &mut [f64; 6], r: &[f64], d: Option<&[f64; 3]>) {
-    (0..3).for_each(|c| sum[c] += r[c]);
-    if let Some(&d) = d {
-        let w = cross(d, [r[0], r[1], r[2]]);
-        (0..3).for_each(|c| sum[3 + c] += w[c]);
-    }
-}
-
-/// `P_i e = t + ω × d_i` of an aggregate's modes `e = [t, ω]` (`t` alone
-/// without `d_i`).
-#[inline(always)]
-fn rigid_motion(e: &[f64], d: Option<&[f64; 3]>) -> [f64; 3] {
-    let mut u = [e[0], e[1], e[2]];
-    if let Some(&d) = d {
-        let w = cross([e[3], e[4], e[5]], d);
-        (0..3).for_each(|c| u[c] += w[c]);
-    }
-    u
-}
-
-/// Every block's position from its aggregate's centroid (m), into
-/// `offsets` (resized), for the aggregates `members[ptr[a]..ptr[a + 1]]`.
-fn centroid_offsets(positions: &[[f64; 3]], ptr: &[u32], members: &[u32], offsets: &mut Vec<[f64; 3]>) {
-    offsets.resize(positions.len(), [0.0; 3]);
-    for a in 0..ptr.len() - 1 {
-        let blocks = &members[ptr[a] as usize..ptr[a + 1] as usize];
-        let mut c = [0.0; 3];
-        for &i in blocks {
-            (0..3).for_each(|d| c[d] += positions[i as usize][d]);
-        }
-        let n = blocks.len() as f64;
-        for &i in blocks {
-            let x = positions[i as usize];
-            offsets[i as usize] = std::array::from_fn(|d| x[d] - c[d] / n);
-        }
-    }
-}
-
-/// The middle level: block Jacobi on the rigid motions of small aggregates
-/// (one round of greedy aggregation: on a tetrahedral mesh a node and its
-/// neighbours, about 11 blocks), `z += Σ_a P_a (P_aᵀ A P_a)⁻¹ P_aᵀ r`, each
-/// aggregate's modes solved alone. It corrects the error between the
-/// scales of block Jacobi (a node) and of the coarse level (a 32nd of the
-/// body), which block Jacobi smooths slowly and the coarse level cannot
-/// resolve: on bunny_100k clamped at its base, CG takes 72 instead of 102
-/// iterations per step at 1e-6.
-#[derive(Default)]
-pub(super) struct LocalSpace {
-    /// Aggregate of every block.
-    of: Vec<u32>,
-    /// Blocks of aggregate `a` at `members[ptr[a]..ptr[a + 1]]`, ascending.
-    ptr: Vec<u32>,
-    members: Vec<u32>,
-    /// Every block's position from its aggregate's centroid (m), when the
-    /// blocks have positions (then six modes per aggregate, else three),
-    /// by block and in the order of `members` (the restriction's).
-    offsets: Vec<[f64; 3]>,
-    member_offsets: Vec<[f64; 3]>,
-    /// Per block column `j`, its blocks `A_ij` with `i` in `j`'s aggregate,
-    /// summed as [`add_block`] does (by [`CoarseSpace::factor`]).
-    column_sums: Vec<[f64; 18]>,
-    /// Per aggregate, `(P_aᵀ A P_a)⁻¹` (column-major, `k x k` for `k`
-    /// modes): a solve is then one small product.
-    inverses: Vec<[f64; 36]>,
-    /// Per aggregate, the correction `e_a = (P_aᵀ A P_a)⁻¹ P_aᵀ r` of the
-    /// last solve, and its share `P_aᵀ r · e_a` of `r · z`.
-    correction: Vec<[f64; 6]>,
-    shares: Vec<f64>,
-}
-
-impl LocalSpace {
-    /// The space of the aggregates `of` (`count` of them), in the arrays
-    /// of `old`.
-    fn from_aggregates(of: &[u32], count: usize, old: Self) -> Self {
-        let (mut own, mut inverses, mut correction, mut shares) = (old.of, old.inverses, old.correction, old.shares);
-        own.clear();
-        own.extend_from_slice(of);
-        let (ptr, members) = group(of, count);
-        inverses.resize(count, [0.0; 36]);
-        correction.resize(count, [0.0; 6]);
-        shares.resize(count, 0.0);
-        let (offsets, member_offsets, mut column_sums) = (old.offsets, old.member_offsets, old.column_sums);
-        column_sums.resize(of.len(), [0.0; 18]);
-        LocalSpace { of: own, ptr, members, offsets, member_offsets, column_sums, inverses, correction, shares }
-    }
-
-    /// Modes per aggregate: 6 with positions, else 3.
-    fn modes(&self) -> usize {
-        if self.offsets.is_empty() {
-            3
-        } else {
-            6
-        }
-    }
-
-    /// Takes the blocks' positions (m), as [`CoarseSpace::set_positions`].
-    pub fn set_positions(&mut self, positions: &[[f64; 3]]) {
-        if positions.len() != self.of.len() {
-            self.offsets.clear();
-            return;
-        }
-        centroid_offsets(positions, &self.ptr, &self.members, &mut self.offsets);
-        self.member_offsets.clear();
-        self.member_offsets.extend(self.members.iter().map(|&i| self.offsets[i as usize]));
-    }
-
-    /// Forms and inverts (by its Cholesky factor) every aggregate's `P_aᵀ A
-    /// P_a`, in parallel over aggregates, from the column sums of its
-    /// members in order. Rotations too small or flat to resist get `1e-12`
-    /// of the block's largest diagonal entry (as in
-    /// [`CoarseSpace::factor`]); an error names the first aggregate whose
-    /// block is not positive definite.
-    fn invert(&mut self) -> Result<(), SolveError> {
-        let (k, rotations) = (self.modes(), !self.offsets.is_empty());
-        let (ptr, members, offsets, column_sums) = (&self.ptr, &self.members, &self.offsets, &self.column_sums);
-        let failed = self.inverses.par_iter_mut().enumerate().filter_map(|(a, matrix)| {
-            matrix.fill(0.0);
-            for &j in &members[ptr[a] as usize..ptr[a + 1] as usize] {
-                let j = j as usize;
-                add_run(&mut matrix[..], k, 0, &column_sums[j], rotations.then(|| offsets[j]));
-            }
-            let largest = (0..k).map(|i| matrix[i * k + i]).fold(0.0f64, f64::max);
-            if rotations {
-                (3..6).for_each(|i| matrix[i * k + i] += 1e-12 * largest);
-            }
-            let mut factor = [0.0; 36];
-            factor[..k * k].copy_from_slice(&matrix[..k * k]);
-            if !cholesky_small(&mut factor[..k * k], k) {
-                return Some(a);
-            }
-            for c in 0..k {
-                let column = &mut matrix[c * k..(c + 1) * k];
-                column.iter_mut().enumerate().for_each(|(r, v)| *v = f64::from(u8::from(r == c)));
-                solve_small(&factor[..k * k], k, column);
-            }
-            None
-        });
-        match failed.min() {
-            Some(a) => Err(SolveError::NotPositiveDefinite { pivot: a, n: self.inverses.len() }),
-            None => Ok(()),
-        }
-    }
-
-    /// Restricts `r` to every aggregate and solves its block, in parallel
-    /// over aggregates (each summing its members in order); returns `r ·
-    /// Σ_a P_a e_a`, the level's share of `r · z`, summed in aggregate
-    /// order.
-    pub fn solve(&mut self, r: &[f64]) -> f64 {
-        let k = self.modes();
-        let (ptr, members, offsets) = (&self.ptr, &self.members, &self.member_offsets);
-        (self.correction.par_iter_mut().zip(&mut self.shares).zip(&self.inverses)).enumerate().for_each(
-            |(a, ((e, share), inverse))| {
-                let mut restricted = [0.0; 6];
-                let range = ptr[a] as usize..ptr[a + 1] as usize;
-                for (k, &i) in range.clone().zip(&members[range]) {
-                    let i = i as usize;
-                    add_restricted(&mut restricted, &r[3 * i..3 * i + 3], offsets.get(k));
-                }
-                *e = [0.0; 6];
-                for (c, &v) in restricted[..k].iter().enumerate() {
-                    e[..k].iter_mut().zip(&inverse[c * k..(c + 1) * k]).for_each(|(e, m)| *e += m * v);
-                }
-                *share = (0..k).map(|c| restricted[c] * e[c]).sum();
-            },
-        );
-        self.shares.iter().sum()
-    }
-
-    /// `(P e)_i`, the correction of the last [`LocalSpace::solve`] at
-    /// block `i`.
-    #[inline(always)]
-    pub fn prolonged(&self, i: usize) -> [f64; 3] {
-        rigid_motion(&self.correction[self.of[i] as usize], self.offsets.get(i))
-    }
-
-    /// `z += Σ_a P_a e_a` after [`LocalSpace::solve`] of `r`; returns the
-    /// level's share of `r · z`.
-    pub fn correct(&mut self, r: &[f64], z: &mut [f64]) -> f64 {
-        let share = self.solve(r);
-        z.par_chunks_mut(3).enumerate().for_each(|(i, z)| {
-            let add = self.prolonged(i);
-            (0..3).for_each(|c| z[c] += add[c]);
-        });
-        share
-    }
-}
-
-/// Overwrites the `k x k` symmetric matrix `m` (column-major, its lower
-/// triangle read) with its lower Cholesky factor; whether it is positive
-/// definite.
-fn cholesky_small(m: &mut [f64], k: usize) -> bool {
-    for j in 0..k {
-        let d = m[j * k + j] - (0..j).map(|q| m[q * k + j] * m[q * k + j]).sum::<f64>();
-        if !(d > 0.0) {
-            return false;
-        }
-        let d = d.sqrt();
-        m[j * k + j] = d;
-        for i in j + 1..k {
-            let v = m[j * k + i] - (0..j).map(|q| m[q * k + i] * m[q * k + j]).sum::<f64>();
-            m[j * k + i] = v / d;
-        }
-    }
-    true
-}
-
-/// Solves `L Lᵀ x = b` in place (`x` holds `b`) with the factor of
-/// [`cholesky_small`].
-fn solve_small(l: &[f64], k: usize, x: &mut [f64]) {
-    for i in 0..k {
-        x[i] = (x[i] - (0..i).map(|q| l[q * k + i] * x[q]).sum::<f64>()) / l[i * k + i];
-    }
-    for i in (0..k).rev() {
-        x[i] = (x[i] - (i + 1..k).map(|q| l[i * k + q] * x[q]).sum::<f64>()) / l[i * k + i];
     }
 }
 
@@ -890,13 +615,13 @@ mod tests {
             let mut coarse = CoarseSpace::new(&blocks, 12);
             if rotations {
                 // positions may come after a first factor of translations
-                coarse.factor(&blocks, &values, None).unwrap();
+                coarse.factor(&blocks, &values).unwrap();
                 coarse.set_positions(&lattice(nx, ny, nz));
             }
             let k = if rotations { 6 } else { 3 };
             let m = k * coarse.aggregates();
             assert!(m > k, "a coarse level of more than one aggregate");
-            coarse.factor(&blocks, &values, None).unwrap();
+            coarse.factor(&blocks, &values).unwrap();
             let a = faer::sparse::SparseColMatRef::new(pattern.as_ref(), &values).to_dense();
             let p = faer::Mat::<f64>::from_fn(n, m, |i, col| {
                 let (block, r) = (i / 3, i % 3);
@@ -940,75 +665,6 @@ mod tests {
         }
     }
 
-    /// The middle level's correction `Σ_a P_a (P_aᵀ A P_a)⁻¹ P_aᵀ r` and its
-    /// share of `r · z` against the same formed densely (the blocks of
-    /// `Pᵀ A P` off its diagonal dropped, each diagonal block's rotations
-    /// given `1e-12` of its largest diagonal entry), with and without
-    /// positions; and the coarse level factored in the same pass is the
-    /// one factored alone.
-    #[test]
-    fn the_middle_level_is_the_dense_block_solve() {
-        let (nx, ny, nz) = (6, 5, 4);
-        let (pattern, values) = grid(nx, ny, nz);
-        let n = pattern.nrows();
-        let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        let a = faer::sparse::SparseColMatRef::new(pattern.as_ref(), &values).to_dense();
-        let r = faer::Mat::<f64>::from_fn(n, 1, |i, _| (i as f64 * 0.7).sin());
-        let r_slice: Vec<f64> = (0..n).map(|i| r[(i, 0)]).collect();
-        for rotations in [false, true] {
-            let (mut coarse, mut local) =
-                CoarseSpace::renew(&blocks, 12, CoarseSpace::default(), LocalSpace::default());
-            let mut alone = CoarseSpace::new(&blocks, 12);
-            if rotations {
-                for space in [&mut coarse, &mut alone] {
-                    space.set_positions(&lattice(nx, ny, nz));
-                }
-                local.set_positions(&lattice(nx, ny, nz));
-            }
-            coarse.factor(&blocks, &values, Some(&mut local)).unwrap();
-            alone.factor(&blocks, &values, None).unwrap();
-            assert_eq!(coarse.factor, alone.factor, "rotations {rotations}: the coarse factor");
-            let k = if rotations { 6 } else { 3 };
-            let aggregates = local.ptr.len() - 1;
-            assert!(aggregates > coarse.aggregates() && aggregates < n / 3, "{aggregates} aggregates");
-            let m = k * aggregates;
-            let p = faer::Mat::<f64>::from_fn(n, m, |i, col| {
-                let (block, r) = (i / 3, i % 3);
-                if local.of[block] as usize != col / k {
-                    return 0.0;
-                }
-                match col % k {
-                    c if c < 3 => f64::from(u8::from(c == r)),
-                    c => cross(unit(c - 3), local.offsets[block])[r],
-                }
-            });
-            let mut blocked = p.transpose() * &a * &p;
-            for i in 0..m {
-                for j in 0..m {
-                    if i / k != j / k {
-                        blocked[(i, j)] = 0.0;
-                    }
-                }
-            }
-            if rotations {
-                for b in 0..aggregates {
-                    let largest = (0..k).map(|i| blocked[(b * k + i, b * k + i)]).fold(0.0f64, f64::max);
-                    (3..6).for_each(|i| blocked[(b * k + i, b * k + i)] += 1e-12 * largest);
-                }
-            }
-            let expected = &p * blocked.llt(faer::Side::Lower).unwrap().solve(p.transpose() * &r);
-            let base: Vec<f64> = (0..n).map(|i| 0.25 * (i as f64).cos()).collect();
-            let mut z = base.clone();
-            let rz = local.correct(&r_slice, &mut z);
-            for i in 0..n {
-                let (got, want) = (z[i] - base[i], expected[(i, 0)]);
-                assert!((got - want).abs() <= 1e-12 * (1.0 + want.abs()), "rotations {rotations}, entry {i}");
-            }
-            let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
-            assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
-        }
-    }
-
     /// An aggregate that cannot rotate (a lone block, blocks on a line)
     /// still factors, and its rotations add nothing to `z`.
     #[test]
@@ -1019,7 +675,7 @@ mod tests {
             let mut coarse = CoarseSpace::new(&blocks, 1);
             let line: Vec<[f64; 3]> = (0..nx).map(|x| [x as f64, 0.0, 0.0]).collect();
             coarse.set_positions(&line);
-            coarse.factor(&blocks, &values, None).unwrap();
+            coarse.factor(&blocks, &values).unwrap();
             let r: Vec<f64> = (0..3 * nx).map(|i| 1.0 + i as f64).collect();
             let mut z = vec![0.0; 3 * nx];
             coarse.correct(&r, &mut z, 1024);
@@ -1027,7 +683,7 @@ mod tests {
             if nx == 1 {
                 // a lone block's correction is its translations' alone
                 let mut translations = CoarseSpace::new(&blocks, 1);
-                translations.factor(&blocks, &values, None).unwrap();
+                translations.factor(&blocks, &values).unwrap();
                 let mut expected = vec![0.0; 3];
                 translations.correct(&r, &mut expected, 1024);
                 for (a, b) in z.iter().zip(&expected) {
