@@ -55,19 +55,16 @@ impl Constraints {
         if !self.fixed.contains(&true) {
             return;
         }
-        let moved = self.fixed.iter().zip(&self.value).any(|(&f, &v)| f && v != 0.0);
-        self.apply_columns(pattern, moved, 0..pattern.blocks().len(), values, rhs);
+        self.apply_columns(pattern, 0..pattern.blocks().len(), values, rhs);
     }
 
     /// [`Constraints::apply`] on the block columns `columns`, whose values
-    /// and right-hand side entries `values` and `rhs` are (`moved`: whether
-    /// a prescribed value is not zero): the range is
+    /// and right-hand side entries `values` and `rhs` are: the range is
     /// halved across threads down to [`BLOCK_COLUMNS_PER_TASK`] columns
     /// (without allocating: a step allocates nothing).
     fn apply_columns(
         &self,
         pattern: &SparsePattern,
-        moved: bool,
         columns: std::ops::Range<usize>,
         values: &mut [f64],
         rhs: &mut [f64],
@@ -78,8 +75,8 @@ impl Constraints {
             let (left_values, right_values) = values.split_at_mut(blocks.start[mid] - blocks.start[columns.start]);
             let (left_rhs, right_rhs) = rhs.split_at_mut(3 * (mid - columns.start));
             rayon::join(
-                || self.apply_columns(pattern, moved, columns.start..mid, left_values, left_rhs),
-                || self.apply_columns(pattern, moved, mid..columns.end, right_values, right_rhs),
+                || self.apply_columns(pattern, columns.start..mid, left_values, left_rhs),
+                || self.apply_columns(pattern, mid..columns.end, right_values, right_rhs),
             );
             return;
         }
@@ -104,7 +101,7 @@ impl Constraints {
                 for r in 0..3 {
                     let row = 3 * i as usize + r;
                     if self.fixed[row] {
-                        if moved {
+                        if self.value[row] != 0.0 {
                             *b -= column[3 * k + r] * self.value[row];
                         }
                         column[3 * k + r] = 0.0;
