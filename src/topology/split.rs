@@ -85,6 +85,14 @@ impl SplitOptions {
         SplitOptions { snap: 0.0, min_quality: 0.0, min_spacing: 0.0, min_diameter: 0.0 }
     }
 
+    /// Deepest fold a part of a split may have, as a fraction of the part's
+    /// diameter (see [`crate::mesh::PolyMesh::non_convexity`]): the snapping
+    /// radius, plus the planarity tolerance of a cap (`1e-6`), within which
+    /// the split takes cap points to lie on the plane.
+    pub fn max_fold(&self) -> f64 {
+        self.snap + CAP_PLANARITY
+    }
+
     /// Checks `snap ∈ [0, 0.5)`, `min_quality ∈ [0, 1)`, `min_spacing ∈
     /// [0, 0.5)`, `min_diameter` finite and `>= 0`.
     pub fn check(&self) -> Result<(), crate::param::ParamError> {
@@ -490,7 +498,7 @@ fn split_is_healthy(
         star && quality(volume, d) >= opts.min_quality
             && d >= opts.min_diameter
             && spacing >= opts.min_spacing * d
-            && fold_depth(part) <= (opts.snap + CAP_PLANARITY) * d
+            && fold_depth(part) <= opts.max_fold() * d
     })
 }
 
