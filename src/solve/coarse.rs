@@ -265,8 +265,11 @@ impl CoarseSpace {
         self.factor = dense;
         match result {
             Ok(_) => Ok(()),
+            // (named by a degree of freedom of the system: the first of
+            // the aggregate whose mode failed)
             Err(llt::factor::LltError::NonPositivePivot { index }) => {
-                Err(SolveError::NotPositiveDefinite { pivot: index, n: m })
+                let first = self.members[self.ptr[index / k] as usize] as usize;
+                Err(SolveError::NotPositiveDefinite { pivot: 3 * first, n: 3 * self.of.len() })
             }
         }
     }
@@ -663,6 +666,31 @@ mod tests {
                 assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
             }
         }
+    }
+
+    /// A coarse matrix that is not positive definite is reported at a
+    /// degree of freedom of the system: the first of the aggregate whose
+    /// mode failed, out of the system's size (not the coarse matrix's).
+    #[test]
+    fn a_failing_coarse_factor_names_a_degree_of_freedom_of_the_system() {
+        let (pattern, mut values) = grid(8, 1, 1);
+        let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
+        let mut coarse = CoarseSpace::new(&blocks, 4);
+        let a = coarse.aggregates() - 1;
+        assert!(a >= 1, "{} aggregates", a + 1);
+        // the last aggregate's own couplings negated: its coarse block is
+        // negative definite, the others' stay positive
+        let last = |b: usize| coarse.of[b] as usize == a;
+        let (col_ptr, row_idx) = (pattern.col_ptr(), pattern.row_idx());
+        for c in 0..pattern.ncols() {
+            for at in col_ptr[c]..col_ptr[c + 1] {
+                if last(c / 3) && last(row_idx[at] / 3) {
+                    values[at] = -values[at];
+                }
+            }
+        }
+        let first = coarse.members[coarse.ptr[a] as usize] as usize;
+        assert_eq!(coarse.factor(&blocks, &values), Err(SolveError::NotPositiveDefinite { pivot: 3 * first, n: 24 }));
     }
 
     /// An aggregate that cannot rotate (a lone block, blocks on a line)

@@ -28,6 +28,15 @@ pub enum SolveError {
         /// The system's size.
         n: usize,
     },
+    /// Conjugate gradients met a search direction `p` with `pᵀ A p <= 0`
+    /// (or not a number): the matrix is not positive definite.
+    #[error("the system matrix is not positive definite: conjugate gradients met a direction of curvature pᵀAp = {curvature:.3e} at iteration {iteration}: is the body unconstrained with zero mass, or a parameter NaN?")]
+    NonPositiveCurvature {
+        /// The iteration (from 0) whose direction it was.
+        iteration: usize,
+        /// `pᵀ A p` of that direction.
+        curvature: f64,
+    },
     /// The symbolic analysis failed.
     #[error("symbolic analysis failed: {0}")]
     Analysis(String),
