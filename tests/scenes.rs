@@ -140,6 +140,27 @@ fn bad_input_ends_in_one_clear_error() {
     assert!(err.contains("not positive definite"), "{err}");
 }
 
+/// `[cutting]` reaches the simulation's split options; a value out of
+/// range is named with its line, an unknown key refused.
+#[test]
+fn the_cutting_table_sets_the_split_options() {
+    let scene = |table: &str| format!("{}{table}", scene_with_mesh("good.mesh"));
+    let loaded = LoadedScene::parse(Path::new("x.toml"), scene("[cutting]\nsnap = 0.05\nmin_part = 0.2\n")).unwrap();
+    let params = loaded.scene.params();
+    let defaults = cleave::topology::SplitOptions::default();
+    assert_eq!((params.cut.snap, params.min_part), (0.05, 0.2));
+    assert_eq!((params.cut.min_quality, params.cut.min_spacing), (defaults.min_quality, defaults.min_spacing));
+    let text = scene("[cutting]\nmin_spacing = 0.7\n");
+    let line = text.lines().position(|l| l.starts_with("min_spacing")).unwrap() + 1;
+    let e = LoadedScene::parse(Path::new("x.toml"), text).unwrap_err();
+    assert!(
+        matches!(&e, SceneError::Invalid { key, line: at, .. } if key == "cutting.min_spacing" && *at == line),
+        "{e}"
+    );
+    let e = LoadedScene::parse(Path::new("x.toml"), scene("[cutting]\nsnapping = 0.1\n")).unwrap_err();
+    assert!(e.to_string().contains("snapping"), "{e}");
+}
+
 #[test]
 fn scene_errors_are_typed() {
     let e = LoadedScene::parse(Path::new("x.toml"), "[mesh]\nfile = \"a\"\n".into()).unwrap_err();

@@ -11,7 +11,7 @@ use crate::sim::{Collider, FixedRegion, GuardLimits, GuardMode, SimulationParams
 use crate::solve::SolverKind;
 use crate::store::dg::{DgOptions, Flux as DgFlux};
 use crate::store::{self, BasisOptions, HarmonicOptions, HealthFloors, QuadratureRule};
-use crate::topology::polygon_plane;
+use crate::topology::{polygon_plane, SplitOptions};
 
 /// A whole scene.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -41,6 +41,9 @@ pub struct Scene {
     /// Cuts during the run.
     #[serde(default)]
     pub cut: Vec<CutSpec>,
+    /// How every cut splits the elements it crosses.
+    #[serde(default)]
+    pub cutting: CuttingSpec,
     /// Adaptive refinement rules.
     #[serde(default)]
     pub refine: Vec<RefineSpec>,
@@ -480,6 +483,26 @@ pub struct CutSpec {
     pub plane: Option<PlaneSpec>,
 }
 
+/// `[cutting]`: the tolerances of every cut's split (see
+/// [`crate::topology::SplitOptions`]), each optional (the defaults of
+/// [`crate::topology::SplitOptions::default`] and
+/// [`SimulationParams::min_part`]).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CuttingSpec {
+    /// Snapping radius, as a fraction of the diameter of the smallest
+    /// crossed element holding a node (default 0.1).
+    pub snap: Option<f64>,
+    /// Smallest shape quality of a part (default 0.02).
+    pub min_quality: Option<f64>,
+    /// Smallest distance between two nodes of an element a cut makes or
+    /// changes, as a fraction of its diameter (default 0.05).
+    pub min_spacing: Option<f64>,
+    /// Smallest diameter of a part, as a fraction of the body's median
+    /// element diameter (default 0.1).
+    pub min_part: Option<f64>,
+}
+
 /// `[[refine]]`: split elements whose stress is high (see
 /// [`crate::sim::RefineRule`]).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -602,6 +625,7 @@ fn key_of(name: &str) -> String {
         "tolerance" | "max_iterations" => format!("solver.{name}"),
         "offset" | "edge_samples" | "quadrature_order" | "degree" | "penalty" => format!("basis.{name}"),
         "mass_fraction" => "basis.mass_floor".into(),
+        "snap" | "min_quality" | "min_spacing" | "min_part" => format!("cutting.{name}"),
         _ => "simulation".into(),
     }
 }
@@ -826,7 +850,7 @@ impl Scene {
 
     /// The engine's simulation parameters of the scene.
     pub fn params(&self) -> SimulationParams {
-        let sim = &self.simulation;
+        let (sim, c, d) = (&self.simulation, &self.cutting, SimulationParams::default());
         SimulationParams {
             material: self.material(),
             gravity: sim.gravity,
@@ -838,7 +862,13 @@ impl Scene {
             solver: self.solver.kind.kind(),
             tolerance: self.solver.tolerance,
             max_iterations: self.solver.max_iterations,
-            ..Default::default()
+            cut: SplitOptions {
+                snap: c.snap.unwrap_or(d.cut.snap),
+                min_quality: c.min_quality.unwrap_or(d.cut.min_quality),
+                min_spacing: c.min_spacing.unwrap_or(d.cut.min_spacing),
+                ..d.cut
+            },
+            min_part: c.min_part.unwrap_or(d.min_part),
         }
     }
 
