@@ -168,7 +168,7 @@ proptest! {
     }
 }
 
-/// Cut sequences random search once found failing, kept as plain tests
+/// Cut sequences on which the random search once failed, kept as plain tests
 /// (proptest's regression file replays only the cases it recorded itself).
 #[test]
 fn recorded_cut_sequences_keep_the_mesh_valid() {
