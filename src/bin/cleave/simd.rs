@@ -6,9 +6,10 @@
 //! for the block sparse product, the health check's spectra and the
 //! envelope Cholesky, which have none: their reference is the same code on
 //! pulp's one-lane scalar backend. Rows report the time of a fixed
-//! amount of work and the speed-up over the reference; every kernel gives
-//! the same bits at every level (their tests check it), so only speed
-//! differs.
+//! amount of work (the median over alternated rounds of the reference and
+//! every level) and the speed-up over the reference (the median of the
+//! rounds' ratios); every kernel gives the same bits at every level (their
+//! tests check it), so only speed differs.
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
@@ -283,10 +284,23 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
         },
     ));
 
+    // the reference and every level in turn, round after round, so that a
+    // slow spell of the machine falls on all of them alike; each speed-up
+    // is the median of its rounds' ratios (a best-of-N time alone swung
+    // from 0.8x to 2x between runs on a shared VM)
+    let rounds = if quick { 3 } else { 9 };
     let mut out = Vec::new();
     for mut kernel in kernels {
+        let mut times = vec![Vec::with_capacity(rounds); 1 + levels.len()];
+        for _ in 0..rounds {
+            cap_simd_level(None);
+            times[0].push((kernel.run)(true));
+            for (t, &level) in times[1..].iter_mut().zip(&levels) {
+                cap_simd_level(Some(level));
+                t.push((kernel.run)(false));
+            }
+        }
         cap_simd_level(None);
-        let reference = (kernel.run)(true);
         let row = |name: String, ms: f64, speedup: f64| Measurement {
             name,
             mesh: kernel.size.clone(),
@@ -294,15 +308,24 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
             nodes: 0,
             ms,
             elements_per_s: 0.0,
-            extra: Some(("speed-up over scalar".into(), speedup)),
+            extra: Some((format!("speed-up over scalar (median of {rounds} rounds)"), speedup)),
         };
-        out.push(row(format!("{} scalar reference", kernel.name), reference, 1.0));
-        for &level in &levels {
-            cap_simd_level(Some(level));
-            let ms = (kernel.run)(false);
-            out.push(row(format!("{} {level:?}", kernel.name), ms, reference / ms));
+        out.push(row(format!("{} scalar reference", kernel.name), median(&times[0]), 1.0));
+        for (t, &level) in times[1..].iter().zip(&levels) {
+            let ratios: Vec<f64> = times[0].iter().zip(t).map(|(r, ms)| r / ms).collect();
+            out.push(row(format!("{} {level:?}", kernel.name), median(t), median(&ratios)));
         }
     }
-    cap_simd_level(None);
     Ok(out)
+}
+
+/// The median of `values` (the mean of the middle two for an even count).
+fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    match n % 2 {
+        1 => sorted[n / 2],
+        _ => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
+    }
 }
