@@ -67,17 +67,48 @@ impl HealthFloors {
 /// the smallest element id (so the error does not depend on the thread
 /// count).
 pub(super) fn check_all(batches: &mut [Batch], floors: &HealthFloors) -> Result<(), BasisError> {
-    let spectra = spectra(batches);
-    for (batch, spectra) in batches.iter_mut().zip(spectra) {
-        check(batch, &spectra, floors)?;
-    }
-    Ok(())
+    let verdicts = assess(batches, floors);
+    record(batches, verdicts)
 }
 
-/// [`check_all`] for one batch whose entries have the `spectra`.
-fn check(batch: &mut Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Result<(), BasisError> {
+/// The verdict on every entry of every batch: its `λ₇ / λ_max`, or the
+/// first of `floors` it fails.
+pub(super) fn assess(batches: &[Batch], floors: &HealthFloors) -> Vec<Vec<Result<f64, BasisError>>> {
+    let spectra = spectra(batches);
+    batches.iter().zip(spectra).map(|(batch, spectra)| verdicts(batch, &spectra, floors)).collect()
+}
+
+/// Stores the ratios of `verdicts` (of [`assess`], 0 for a failed entry)
+/// in the batches and returns the error [`check_all`] names, if any.
+pub(super) fn record(batches: &mut [Batch], verdicts: Vec<Vec<Result<f64, BasisError>>>) -> Result<(), BasisError> {
+    let mut first_failure: Option<BasisError> = None;
+    for (batch, verdicts) in batches.iter_mut().zip(verdicts) {
+        let mut worst: Option<BasisError> = None;
+        let mut stored = Vec::with_capacity(verdicts.len());
+        for (i, r) in verdicts.into_iter().enumerate() {
+            match r {
+                Ok(ratio) => stored.push(ratio),
+                Err(e) => {
+                    stored.push(0.0);
+                    let first = worst.as_ref().is_none_or(|w| (batch.elements[i] as usize) < w.element());
+                    if first {
+                        worst = Some(e);
+                    }
+                }
+            }
+        }
+        batch.stiffness_ratio = stored;
+        if first_failure.is_none() {
+            first_failure = worst;
+        }
+    }
+    first_failure.map_or(Ok(()), Err)
+}
+
+/// The verdict on every entry of `batch`, whose entries have the `spectra`.
+fn verdicts(batch: &Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Vec<Result<f64, BasisError>> {
     let k = batch.k;
-    let ratios: Vec<Result<f64, BasisError>> = (0..batch.len())
+    (0..batch.len())
         .into_par_iter()
         .map(|i| {
             let element = batch.elements[i] as usize;
@@ -97,23 +128,7 @@ fn check(batch: &mut Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Resu
             }
             Ok(ratio)
         })
-        .collect();
-    let mut worst: Option<BasisError> = None;
-    let mut stored = Vec::with_capacity(ratios.len());
-    for (i, r) in ratios.into_iter().enumerate() {
-        match r {
-            Ok(ratio) => stored.push(ratio),
-            Err(e) => {
-                stored.push(0.0);
-                let first = worst.as_ref().is_none_or(|w| (batch.elements[i] as usize) < w.element());
-                if first {
-                    worst = Some(e);
-                }
-            }
-        }
-    }
-    batch.stiffness_ratio = stored;
-    worst.map_or(Ok(()), Err)
+        .collect()
 }
 
 /// Elements whose spectra one task estimates together: a few SIMD lane

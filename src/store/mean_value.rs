@@ -43,7 +43,7 @@ pub(super) fn build_batch(
     let nt = 2 * k - 4;
     let nq = match rule {
         QuadratureRule::Consistent | QuadratureRule::Paper => paper_rule_len(k, nt),
-        QuadratureRule::Reference(order) => nt * order.pow(3),
+        QuadratureRule::Reference(order) | QuadratureRule::ConsistentGauss(order) => nt * order.pow(3),
     };
     // (in parallel, the first in order named: the same error on any pool)
     if let Some(&e) = elements.par_iter().find_first(|&&e| !mesh.is_convex(e as usize, CONVEXITY_TOLERANCE)) {
@@ -73,7 +73,7 @@ pub(super) fn build_batch(
         let np = paper_rule_len(k, nt);
         let v = match rule {
             QuadratureRule::Consistent | QuadratureRule::Paper => paper_rule(verts, tris, pts, wts, mu),
-            QuadratureRule::Reference(order) => {
+            QuadratureRule::Reference(order) | QuadratureRule::ConsistentGauss(order) => {
                 let mut paper_pts = vec![[0.0; 3]; np];
                 let v = paper_rule(verts, tris, &mut paper_pts, &mut s.mu[..np], mu);
                 let (p, w) = reference_rule(verts, tris, order);
@@ -92,7 +92,7 @@ pub(super) fn build_batch(
         }
         *vol = v;
         mean_value::evaluate(verts, tris, pts, &mut s.phi, &mut s.grad, MemStack::new(&mut s.stack));
-        if rule == QuadratureRule::Consistent {
+        if matches!(rule, QuadratureRule::Consistent | QuadratureRule::ConsistentGauss(_)) {
             consistency_correction(verts, tris, wts, &mut s.grad, &mut s.moments);
         }
         elasticity::element_stiffness(&s.grad, wts, k, lambda, mu_lame, &mut s.gram, ke);
