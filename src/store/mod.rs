@@ -344,6 +344,14 @@ impl Batch {
     }
 }
 
+/// Points `locate` of every entry of `batch`, batch `b` of its store, at
+/// its place.
+fn locate_entries(locate: &mut [(u32, u32)], b: usize, batch: &Batch) {
+    for (i, &e) in batch.elements.iter().enumerate() {
+        locate[e as usize] = (b as u32, i as u32);
+    }
+}
+
 /// Gauss–Legendre order per direction of the rule that integrates the mean
 /// value elements the paper's points leave soft ([`ElementStore::build`]):
 /// 27 points per surface triangle.
@@ -569,10 +577,7 @@ impl ElementStore {
             Vec::new()
         };
         let mut store = ElementStore { batches: Vec::new(), locate: vec![(u32::MAX, u32::MAX); mesh.elements.len()] };
-        for (b, ((kind, k), elements)) in by_kind.into_iter().enumerate() {
-            for (i, &e) in elements.iter().enumerate() {
-                store.locate[e as usize] = (b as u32, i as u32);
-            }
+        for ((kind, k), elements) in by_kind {
             let batch = match kind {
                 ElementKind::LinearTet => tet::build_batch(mesh, material, elements)?,
                 ElementKind::MeanValue => mean_value::build_batch(mesh, material, options.quadrature, k, elements)?,
@@ -586,7 +591,7 @@ impl ElementStore {
                     batch
                 }
             };
-            store.batches.push(batch);
+            store.push_located(batch);
         }
         let mut verdicts = health::assess(&store.batches, &options.health);
         let refined = match options.quadrature {
@@ -599,13 +604,15 @@ impl ElementStore {
             let mut batch = [mean_value::build_batch(mesh, material, rule, k, elements)?];
             health::check_all(&mut batch, &options.health)?;
             let [batch] = batch;
-            let b = store.batches.len() as u32;
-            for (i, &e) in batch.elements.iter().enumerate() {
-                store.locate[e as usize] = (b, i as u32);
-            }
-            store.batches.push(batch);
+            store.push_located(batch);
         }
         Ok((store, faces_integrated))
+    }
+
+    /// Appends `batch` and locates its entries there.
+    fn push_located(&mut self, batch: Batch) {
+        locate_entries(&mut self.locate, self.batches.len(), &batch);
+        self.batches.push(batch);
     }
 
     /// Removes from the mean value batches (with their `verdicts`) the
@@ -632,9 +639,7 @@ impl ElementStore {
                 batch.swap_remove(i);
                 let _soft = verdicts.swap_remove(i);
             }
-            for (i, &e) in batch.elements.iter().enumerate() {
-                self.locate[e as usize] = (b as u32, i as u32);
-            }
+            locate_entries(&mut self.locate, b, batch);
         }
         soft.values_mut().for_each(|elements| elements.sort_unstable());
         soft
