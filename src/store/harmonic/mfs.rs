@@ -31,10 +31,10 @@ use std::cell::RefCell;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
+use faer::linalg::lu::partial_pivoting;
 use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::qr::no_pivoting::{factor, solve};
-use faer::linalg::solvers::DenseSolveCore;
 use faer::reborrow::IntoConst;
 use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
 
@@ -224,7 +224,7 @@ pub(super) fn fit_by<const D: usize>(
     ]);
     let mut coefficients = vec![0.0; cols * k];
     let (mut max_error, mut sum_sq) = (0.0f64, 0.0);
-    let method = WORKSPACE.with_borrow_mut(|work| {
+    let mut fit_in = |work: &mut Workspace| {
         let [a, rhs, gram, values] =
             Workspace::arrays(&mut work.values, [m * cols, m * k, cols * cols.max(block), m * k]);
         let stack = Workspace::stack(&mut work.stack, scratch);
@@ -282,6 +282,13 @@ pub(super) fn fit_by<const D: usize>(
             }
         }
         Some(method)
+    };
+    // (a fit on this thread may already hold the workspace: a faer or
+    // rayon call that waits runs other jobs of the pool meanwhile, and one
+    // may be another fit; that one takes a workspace of its own)
+    let method = WORKSPACE.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut work) => fit_in(&mut work),
+        Err(_) => fit_in(&mut Workspace::default()),
     })?;
     let error = measure.then(|| FitError { max: max_error, rms: (sum_sq / (m * k) as f64).sqrt() });
     Some((Fit { centres, coefficients, k }, method, error))
@@ -357,10 +364,30 @@ fn reproduce_linear<const D: usize>(c: &mut [f64], n: usize, nodes: &[[f64; D]])
     let k = nodes.len();
     let rows = n + D + 1;
     let p = |a: usize, l: usize| if l == 0 { 1.0 } else { nodes[a][l - 1] };
-    // Gram matrix PᵀP ((D+1)²) and its inverse by Gauss–Jordan
+    // Gram matrix PᵀP ((D+1)²) and its inverse by LU, on this thread (a
+    // parallel call would let the pool run other jobs here meanwhile)
     let dim = D + 1;
-    let g = Mat::<f64>::from_fn(dim, dim, |r, s| (0..k).map(|a| p(a, r) * p(a, s)).sum());
-    let ginv = g.partial_piv_lu().inverse();
+    let mut lu = Mat::<f64>::from_fn(dim, dim, |r, s| (0..k).map(|a| p(a, r) * p(a, s)).sum());
+    let (mut perm, mut perm_inv) = ([0usize; 4], [0usize; 4]);
+    let scratch = StackReq::any_of(&[
+        partial_pivoting::factor::lu_in_place_scratch::<usize, f64>(dim, dim, Par::Seq, Default::default()),
+        partial_pivoting::inverse::inverse_scratch::<usize, f64>(dim, Par::Seq),
+    ]);
+    let mut buffer = MemBuffer::new(scratch);
+    let (perm, perm_inv) = (&mut perm[..dim], &mut perm_inv[..dim]);
+    let stack = MemStack::new(&mut buffer);
+    let (_, row_perm) =
+        partial_pivoting::factor::lu_in_place(lu.as_mut(), perm, perm_inv, Par::Seq, stack, Default::default());
+    let mut ginv = Mat::<f64>::zeros(dim, dim);
+    // (the unit lower factor and the upper one share `lu`)
+    partial_pivoting::inverse::inverse(
+        ginv.as_mut(),
+        lu.as_ref(),
+        lu.as_ref(),
+        row_perm,
+        Par::Seq,
+        MemStack::new(&mut buffer),
+    );
     if !ginv.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
         return None;
     }
@@ -445,6 +472,18 @@ mod tests {
                 assert!((x - y).abs() < 1e-9, "at {p:?}: {x} against {y}");
             }
         }
+    }
+
+    /// A fit that starts while another on the same thread holds the
+    /// workspace (a job the pool runs while that fit waits) takes a
+    /// workspace of its own, and gives the same coefficients: the CI once
+    /// panicked with "RefCell already borrowed" there.
+    #[test]
+    fn a_fit_inside_a_fit_on_the_same_thread_has_its_own_workspace() {
+        let Problem { centres, collocation, targets, nodes } = cube_problem();
+        let alone = fit(centres.clone(), &collocation, &targets, &nodes, false).expect("a fit").0;
+        let nested = WORKSPACE.with_borrow_mut(|_held| fit(centres, &collocation, &targets, &nodes, false));
+        assert_eq!(nested.expect("a fit").0.coefficients, alone.coefficients);
     }
 
     /// Two kernels `10⁻⁷` apart make the normal equations untrustworthy;
