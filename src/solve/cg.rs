@@ -15,12 +15,22 @@
 //! forms `p · A p`. Sums run over fixed chunks in parallel and the chunk
 //! sums in order, so the iterates are bitwise independent of the thread
 //! count.
+//!
+//! The iteration runs in the solver's own numbering of the blocks, a
+//! reverse Cuthill–McKee order of the block graph made once per pattern
+//! (`ordering.rs`): the values are carried into it as they are rounded, the
+//! right-hand side and the guess on entry, the solution back on exit. A
+//! mesh numbered as its file numbers it makes the product gather from all
+//! over the vector; on bunny_100k (2 cores, AMD EPYC) the renumbering took
+//! the CG step with its base clamped from 102 to 87 iterations (the
+//! aggregates follow the order too) and its solve from about 140 to 63 ms.
 
 use cleave_kernels::spmv::{block_products, BlockColumns, Value};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
 use super::coarse::{aggregate_limit, CoarseSpace};
+use super::ordering::Renumbering;
 use super::{Cholesky, LinearSolver, SolveError, SolveStats};
 
 /// Chunk length of the deterministic reductions.
@@ -41,15 +51,19 @@ pub struct ConjugateGradient {
     pub tolerance: f64,
     /// Iteration cap; reaching it is an error.
     pub max_iterations: usize,
-    /// Value index of entry `(3j + r, 3j + c)` at `[j][3r + c]`.
+    /// The matrix's 3x3 block structure in the solver's own numbering of
+    /// the blocks (see [`ConjugateGradient::analyze_blocks`]), in which
+    /// every vector and value of the iteration lives.
+    numbering: Renumbering,
+    /// Value index (in the solver's layout) of entry `(3j + r, 3j + c)`
+    /// at `[j][3r + c]`.
     diagonal_blocks: Vec<[usize; 9]>,
     /// Inverted diagonal blocks of the current matrix, each symmetric and
     /// stored as its upper triangle `[m00, m01, m02, m11, m12, m22]`.
     inverse_blocks: Vec<[f64; 6]>,
-    /// The matrix's 3x3 block structure.
-    blocks: BlockStructure,
-    /// The matrix values rounded to `f32`, for the products of the
-    /// iteration (see [`ConjugateGradient::solve`]).
+    /// The matrix values in the solver's layout, and rounded to `f32` for
+    /// the products of the iteration (see [`ConjugateGradient::solve`]).
+    values: Vec<f64>,
     values32: Vec<f32>,
     /// Whether every rounded value is finite (else the iteration reads the
     /// `f64` values).
@@ -60,10 +74,15 @@ pub struct ConjugateGradient {
     /// Per-chunk restrictions `Pᵀ r` of the update pass (one coarse vector
     /// per chunk; one value per chunk without a coarse level).
     partial_restrictions: Vec<f64>,
+    /// The right-hand side and the solution in the solver's numbering.
+    b: Vec<f64>,
+    x: Vec<f64>,
     r: Vec<f64>,
     z: Vec<f64>,
     p: Vec<f64>,
     ap: Vec<f64>,
+    /// The blocks' positions in the solver's numbering.
+    positions: Vec<[f64; 3]>,
     /// `Rᵀ r` and `A₀⁻¹ Rᵀ r` of the rotated preconditioner.
     rotated: Vec<f64>,
     /// The rotated rest-state preconditioner, when chosen.
@@ -196,18 +215,22 @@ impl ConjugateGradient {
         ConjugateGradient {
             tolerance,
             max_iterations,
+            numbering: Renumbering::default(),
             diagonal_blocks: Vec::new(),
             inverse_blocks: Vec::new(),
-            blocks: BlockStructure::default(),
+            values: Vec::new(),
             values32: Vec::new(),
             rounded: false,
             partial: Vec::new(),
             partial_pairs: Vec::new(),
             partial_restrictions: Vec::new(),
+            b: Vec::new(),
+            x: Vec::new(),
             r: Vec::new(),
             z: Vec::new(),
             p: Vec::new(),
             ap: Vec::new(),
+            positions: Vec::new(),
             rotated: Vec::new(),
             rest: None,
             coarse: None,
@@ -226,7 +249,7 @@ impl ConjugateGradient {
     /// chunk of blocks and the chunk sums in order (the same bits on any
     /// number of threads).
     fn matvec<T: Value>(&self, val: &[T], x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
-        let structure = self.blocks.columns();
+        let structure = self.numbering.blocks().columns();
         y.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (yc, part))| {
             *part = block_products(structure, val, x, c * CHUNK_BLOCKS, yc);
         });
@@ -234,21 +257,29 @@ impl ConjugateGradient {
     }
 
     /// `r = b - A x` with the `f64` values; returns `|r|`.
-    fn exact_residual(&mut self, values: &[f64], b: &[f64], x: &[f64]) -> f64 {
+    fn exact_residual(&mut self, b: &[f64], x: &[f64]) -> f64 {
         let (mut r, mut partial) = (std::mem::take(&mut self.r), std::mem::take(&mut self.partial));
-        self.matvec(values, x, &mut r, &mut partial);
+        self.matvec(&self.values, x, &mut r, &mut partial);
         self.partial = partial;
         r.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
         self.r = r;
         dot(&self.r, &self.r).sqrt()
     }
 
-    /// [`ConjugateGradient::iterate`] on the values rounded to `f32`.
-    fn iterate_rounded(&mut self, goal: f64, budget: usize, x: &mut [f64]) -> Result<usize, SolveError> {
-        let values32 = std::mem::take(&mut self.values32);
-        let out = self.iterate(&values32, goal, budget, x);
-        self.values32 = values32;
-        out
+    /// [`ConjugateGradient::iterate`] on the `f64` values (`exact`) or on
+    /// the values rounded to `f32`.
+    fn iterate_on(&mut self, exact: bool, goal: f64, budget: usize, x: &mut [f64]) -> Result<usize, SolveError> {
+        if exact {
+            let values = std::mem::take(&mut self.values);
+            let out = self.iterate(&values, goal, budget, x);
+            self.values = values;
+            out
+        } else {
+            let values32 = std::mem::take(&mut self.values32);
+            let out = self.iterate(&values32, goal, budget, x);
+            self.values32 = values32;
+            out
+        }
     }
 
     /// Preconditioned CG on `A d = r` from `d = 0`, `r` the residual held
@@ -306,24 +337,54 @@ impl ConjugateGradient {
         Ok(budget)
     }
 
+    /// The solve of [`LinearSolver::solve`] in the solver's numbering.
+    fn solve_own(&mut self, b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError> {
+        let norm_b = dot(b, b).sqrt();
+        if norm_b == 0.0 {
+            x.fill(0.0);
+            return Ok(SolveStats { iterations: 0, residual: 0.0 });
+        }
+        let goal = self.tolerance * norm_b;
+        let (mut iterations, mut exact) = (0, !self.rounded);
+        let mut norm_r = self.exact_residual(b, x);
+        loop {
+            if norm_r <= goal {
+                return Ok(SolveStats { iterations, residual: norm_r / norm_b });
+            }
+            if !norm_r.is_finite() {
+                return Err(SolveError::NonFinite);
+            }
+            let budget = self.max_iterations - iterations;
+            if budget == 0 {
+                return Err(SolveError::NotConverged {
+                    iterations,
+                    residual: norm_r / norm_b,
+                    tolerance: self.tolerance,
+                });
+            }
+            iterations += self.iterate_on(exact, goal, budget, x)?;
+            let before = norm_r;
+            norm_r = self.exact_residual(b, x);
+            exact |= norm_r > 0.5 * before;
+        }
+    }
+
     fn precondition(&mut self, r: &[f64], z: &mut [f64]) -> Result<(), SolveError> {
         if let Some(rest) = self.rest.as_mut().filter(|p| p.ready) {
-            let rotate = |frames: &[[f64; 9]], v: &[f64], out: &mut [f64], transpose: bool| {
-                out.par_chunks_mut(3).zip(v.par_chunks(3)).zip(frames).for_each(|((o, v), m)| {
-                    for i in 0..3 {
-                        o[i] = if transpose {
-                            m[i] * v[0] + m[3 + i] * v[1] + m[6 + i] * v[2]
-                        } else {
-                            row_times(m, i, v)
-                        };
-                    }
-                });
-            };
+            // (the factor and the frames are in the caller's numbering:
+            // Rᵀ r is formed there, R A₀⁻¹ Rᵀ r carried back)
+            let (order, rank) = (self.numbering.order(), self.numbering.rank());
             let t = &mut self.rotated;
             t.resize(r.len(), 0.0);
-            rotate(&rest.frames, r, t, true);
+            t.par_chunks_mut(3).zip(&rest.frames).zip(rank).for_each(|((t, m), &b)| {
+                let v = &r[3 * b as usize..3 * b as usize + 3];
+                (0..3).for_each(|i| t[i] = m[i] * v[0] + m[3 + i] * v[1] + m[6 + i] * v[2]);
+            });
             rest.cholesky.solve_in_place(t)?;
-            rotate(&rest.frames, t, z, false);
+            z.par_chunks_mut(3).zip(order).for_each(|(z, &o)| {
+                let (m, v) = (&rest.frames[o as usize], &t[3 * o as usize..3 * o as usize + 3]);
+                (0..3).for_each(|i| z[i] = row_times(m, i, v));
+            });
             return Ok(());
         }
         z.par_chunks_mut(3).zip(r.par_chunks(3)).zip(&self.inverse_blocks).for_each(|((z, r), m)| {
@@ -464,6 +525,16 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// A vector of 3-blocks as its blocks.
+fn as_blocks(v: &[f64]) -> &[[f64; 3]] {
+    bytemuck::cast_slice(v)
+}
+
+/// [`as_blocks`], mutable.
+fn as_blocks_mut(v: &mut [f64]) -> &mut [[f64; 3]] {
+    bytemuck::cast_slice_mut(v)
+}
+
 /// Inverse of a 3x3 matrix (row-major); the identity where it is singular.
 fn invert3(m: [f64; 9]) -> [f64; 9] {
     let c = [
@@ -502,8 +573,11 @@ impl LinearSolver for ConjugateGradient {
         }
         // (the arrays of the previous topology's analysis are reused: a
         // solver renewed by a cut writes into pages it already has)
+        self.numbering.renew(blocks);
+        let blocks = self.numbering.blocks();
         // the diagonal block's nine slots from its position among the block
-        // rows (one search per block; the first block without one is named)
+        // rows (one search per block; the first block without one is named
+        // in the caller's numbering)
         let slot = |j: usize| -> Option<[usize; 9]> {
             let rows = blocks.column_rows(j);
             let p = rows.binary_search(&(j as u32)).ok()?;
@@ -511,7 +585,8 @@ impl LinearSolver for ConjugateGradient {
             Some(std::array::from_fn(|k| blocks.start[j] + (k % 3) * stride + 3 * p + k / 3))
         };
         if let Some(j) = (0..n / 3).into_par_iter().find_first(|&j| slot(j).is_none()) {
-            return Err(SolveError::Analysis(format!("block {j} has no diagonal")));
+            let block = self.numbering.order()[j];
+            return Err(SolveError::Analysis(format!("block {block} has no diagonal")));
         }
         self.diagonal_blocks.clear();
         self.diagonal_blocks.par_extend((0..n / 3).into_par_iter().map(|j| slot(j).expect("checked above")));
@@ -524,11 +599,10 @@ impl LinearSolver for ConjugateGradient {
         if let Some(rest) = self.rest.as_mut() {
             rest.ready = false;
         }
-        self.blocks.ptr.clone_from(&blocks.ptr);
-        self.blocks.rows.clone_from(&blocks.rows);
-        self.blocks.start.clone_from(&blocks.start);
         // (every entry is written before it is read in a solve)
-        for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
+        self.values.resize(pattern.row_idx().len(), 0.0);
+        self.values32.resize(pattern.row_idx().len(), 0.0);
+        for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
             v.resize(n, 0.0);
         }
         let chunks = (n / 3).div_ceil(CHUNK_BLOCKS);
@@ -539,33 +613,29 @@ impl LinearSolver for ConjugateGradient {
 
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
         let val = matrix.parts().1;
-        self.values32.resize(val.len(), 0.0);
-        // one parallel pass rounds the values to f32 and checks both: a
-        // finite value beyond f32's range rounds to infinity, and then the
-        // iteration takes the f64 values throughout
-        let (finite, rounded) = self
-            .values32
-            .par_chunks_mut(CHUNK)
-            .zip(val.par_chunks(CHUNK))
-            .map(|(lo, hi)| {
-                lo.iter_mut().zip(hi).for_each(|(l, &h)| *l = h as f32);
-                (hi.iter().all(|h| h.is_finite()), lo.iter().all(|l| l.is_finite()))
-            })
-            .reduce(|| (true, true), |a, b| (a.0 && b.0, a.1 && b.1));
+        if val.len() != self.values.len() {
+            return Err(SolveError::NotReady);
+        }
+        // one parallel pass carries the values into the solver's layout,
+        // rounds them to f32 and checks both: a finite value beyond f32's
+        // range rounds to infinity, and then the iteration takes the f64
+        // values throughout
+        let (finite, rounded) = self.numbering.carry_values(val, &mut self.values, &mut self.values32);
         if !finite {
             return Err(SolveError::NonFinite);
         }
         self.rounded = rounded;
+        let values = &self.values;
         self.inverse_blocks.par_iter_mut().zip(&self.diagonal_blocks).for_each(|(inv, slots)| {
-            let m = invert3(slots.map(|s| val[s]));
+            let m = invert3(slots.map(|s| values[s]));
             *inv = [m[0], m[1], m[2], m[4], m[5], m[8]];
         });
         if let Some(coarse) = self.coarse.as_mut() {
             // (from the values the iteration reads: the preconditioner
             // need not be exact, and they are half the bytes)
             match self.rounded {
-                true => coarse.factor(&self.blocks, &self.values32)?,
-                false => coarse.factor(&self.blocks, val)?,
+                true => coarse.factor(self.numbering.blocks(), &self.values32)?,
+                false => coarse.factor(self.numbering.blocks(), &self.values)?,
             }
         }
         // one coarse vector per chunk of the update pass (one value per
@@ -582,7 +652,9 @@ impl LinearSolver for ConjugateGradient {
     /// rounded matrix but not on the exact one, it carries on from the
     /// exact residual (iterative refinement), and should a round gain less
     /// than a factor 2 (the rounded matrix too far from the exact one), it
-    /// iterates on the `f64` values from there.
+    /// iterates on the `f64` values from there. The iteration runs in the
+    /// solver's numbering of the blocks: `b` and the guess `x` are carried
+    /// there, the solution back.
     fn solve(
         &mut self,
         matrix: SparseColMatRef<'_, usize, f64>,
@@ -592,39 +664,17 @@ impl LinearSolver for ConjugateGradient {
         if b.iter().chain(x.iter()).any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
-        let norm_b = dot(b, b).sqrt();
-        if norm_b == 0.0 {
-            x.fill(0.0);
-            return Ok(SolveStats { iterations: 0, residual: 0.0 });
-        }
-        let values = matrix.parts().1;
-        if self.values32.len() != values.len() {
+        let n = self.b.len();
+        if matrix.parts().1.len() != self.values.len() || b.len() != n || x.len() != n {
             return Err(SolveError::NotReady);
         }
-        let goal = self.tolerance * norm_b;
-        let (mut iterations, mut exact) = (0, !self.rounded);
-        let mut norm_r = self.exact_residual(values, b, x);
-        loop {
-            if norm_r <= goal {
-                return Ok(SolveStats { iterations, residual: norm_r / norm_b });
-            }
-            if !norm_r.is_finite() {
-                return Err(SolveError::NonFinite);
-            }
-            let budget = self.max_iterations - iterations;
-            if budget == 0 {
-                return Err(SolveError::NotConverged {
-                    iterations,
-                    residual: norm_r / norm_b,
-                    tolerance: self.tolerance,
-                });
-            }
-            iterations +=
-                if exact { self.iterate(values, goal, budget, x)? } else { self.iterate_rounded(goal, budget, x)? };
-            let before = norm_r;
-            norm_r = self.exact_residual(values, b, x);
-            exact |= norm_r > 0.5 * before;
-        }
+        let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
+        self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
+        self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
+        let stats = self.solve_own(&b_own, &mut x_own);
+        self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
+        (self.b, self.x) = (b_own, x_own);
+        stats
     }
 
     fn set_reference(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
@@ -642,7 +692,14 @@ impl LinearSolver for ConjugateGradient {
 
     fn set_positions(&mut self, positions: &[[f64; 3]]) {
         if let Some(coarse) = self.coarse.as_mut() {
-            coarse.set_positions(positions);
+            // (positions of another length are refused by the coarse level)
+            if positions.len() == self.numbering.order().len() {
+                self.positions.resize(positions.len(), [0.0; 3]);
+                self.numbering.to_new(positions, &mut self.positions);
+                coarse.set_positions(&self.positions);
+            } else {
+                coarse.set_positions(positions);
+            }
         }
     }
 

@@ -16,6 +16,7 @@
 use cleave_kernels::envelope::{self, Envelope};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 
+use super::ordering::reverse_cuthill_mckee;
 use super::{LinearSolver, SolveError, SolveStats};
 
 /// A value slot of the pattern that is not copied (the upper triangle).
@@ -163,83 +164,6 @@ fn too_large(len: usize) -> SolveError {
     SolveError::Analysis(format!("an envelope of {len} values is too large"))
 }
 
-/// Reverse Cuthill–McKee order of a graph of `n` vertices: per connected
-/// component, a breadth-first search from a pseudo-peripheral vertex
-/// (George–Liu), visiting neighbours by increasing degree (ties by index),
-/// then the whole order reversed. Vertices may repeat in `neighbours`.
-fn reverse_cuthill_mckee<I: Iterator<Item = usize>>(n: usize, neighbours: impl Fn(usize) -> I) -> Vec<u32> {
-    let degree: Vec<usize> = (0..n).map(|v| neighbours(v).count()).collect();
-    let mut order: Vec<u32> = Vec::with_capacity(n);
-    let mut placed = vec![false; n];
-    let mut seen = vec![usize::MAX; n];
-    let mut stamp = 0;
-    // breadth-first levels from `root` over unplaced vertices: the last
-    // level's vertices and the number of levels
-    let mut levels = |root: usize, placed: &[bool], out: &mut Vec<usize>| -> (usize, usize) {
-        stamp += 1;
-        out.clear();
-        out.push(root);
-        seen[root] = stamp;
-        let (mut begin, mut depth) = (0, 0);
-        loop {
-            let end = out.len();
-            for idx in begin..end {
-                for u in neighbours(out[idx]) {
-                    if !placed[u] && seen[u] != stamp {
-                        seen[u] = stamp;
-                        out.push(u);
-                    }
-                }
-            }
-            if out.len() == end {
-                return (begin, depth);
-            }
-            begin = end;
-            depth += 1;
-        }
-    };
-    let mut queue = Vec::with_capacity(n);
-    let mut next: Vec<usize> = Vec::new();
-    for seed in 0..n {
-        if placed[seed] {
-            continue;
-        }
-        // pseudo-peripheral root: move to a least-degree vertex of the last
-        // level while that makes the search deeper
-        let mut root = seed;
-        let (mut last, mut depth) = levels(root, &placed, &mut queue);
-        loop {
-            let candidate = *queue[last..].iter().min_by_key(|&&u| (degree[u], u)).unwrap_or(&root);
-            let (l, d) = levels(candidate, &placed, &mut queue);
-            if d <= depth {
-                break;
-            }
-            (root, last, depth) = (candidate, l, d);
-        }
-        // Cuthill–McKee from the root
-        let begin = order.len();
-        order.push(root as u32);
-        placed[root] = true;
-        let mut head = begin;
-        while head < order.len() {
-            let v = order[head] as usize;
-            head += 1;
-            next.clear();
-            next.extend(neighbours(v).filter(|&u| !placed[u]));
-            next.sort_unstable_by_key(|&u| (degree[u], u));
-            next.dedup();
-            for &u in &next {
-                if !placed[u] {
-                    placed[u] = true;
-                    order.push(u as u32);
-                }
-            }
-        }
-    }
-    order.reverse();
-    order
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -315,20 +239,5 @@ mod tests {
         let t = [Triplet::new(0, 0, 1.0), Triplet::new(1, 1, 2.0)];
         let unblocked = SparseColMat::<usize, f64>::try_new_from_triplets(2, 2, &t).unwrap();
         assert!(matches!(env.analyze(unblocked.symbolic()), Err(SolveError::Analysis(_))));
-    }
-
-    #[test]
-    fn reverse_cuthill_mckee_orders_every_vertex_once_per_component() {
-        // two paths, 0-2-4 and 1-3, and an isolated vertex 5
-        let edges = [vec![2], vec![3], vec![0, 4], vec![1], vec![2], vec![]];
-        let order = reverse_cuthill_mckee(6, |v| edges[v].iter().copied());
-        let mut sorted = order.clone();
-        sorted.sort_unstable();
-        assert_eq!(sorted, vec![0, 1, 2, 3, 4, 5]);
-        // a path keeps its vertices consecutive, in path order
-        let pos = |v: u32| order.iter().position(|&u| u == v).unwrap();
-        assert_eq!(pos(2).abs_diff(pos(0)), 1);
-        assert_eq!(pos(2).abs_diff(pos(4)), 1);
-        assert_eq!(pos(1).abs_diff(pos(3)), 1);
     }
 }

@@ -8,6 +8,7 @@ mod cg;
 mod cholesky;
 mod coarse;
 mod envelope;
+mod ordering;
 mod tree_solve;
 
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
