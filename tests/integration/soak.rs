@@ -13,8 +13,8 @@
 //! reported as it goes.
 //!
 //! The CI form: 20 cuts over 400 steps. The full form (200 cuts over
-//! 10,000 steps): `CLEAVE_SOAK=full cargo test --release --test soak --
-//! --nocapture`.
+//! 10,000 steps): `CLEAVE_SOAK=full cargo test --release --test
+//! integration soak:: -- --nocapture`.
 
 use cleave::material::Material;
 use cleave::mesh::Plane;

@@ -1,7 +1,7 @@
 //! Mean value elements assembled: the tetrahedron case, the patch test
 //! with the consistent and the paper's rule, and thread-count independence
-//! (their spectra are in `tests/spectra.rs`, the cantilever's convergence
-//! in `tests/convergence.rs`).
+//! (their spectra are in `tests/integration/spectra.rs`, the cantilever's convergence
+//! in `tests/integration/convergence.rs`).
 
 use cleave::assembly::SparsePattern;
 use cleave::material::Material;
@@ -14,7 +14,7 @@ use cleave::topology::{split_by_plane, SplitOptions};
 use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use cleave_kernels::{elasticity, mean_value, quadrature};
 
-mod common;
+use crate::common;
 
 fn material() -> Material {
     Material::new(1e5, 0.3, 1000.0).unwrap()

@@ -10,7 +10,7 @@ use cleave::meshing::{box_hex, box_l_prisms};
 use cleave::store::{BasisOptions, Family};
 use cleave::topology::{split_by_plane, SplitOptions};
 
-mod common;
+use crate::common;
 
 /// The independent limit of the tip deflection (m).
 const LIMIT: f64 = 39.27;

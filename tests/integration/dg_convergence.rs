@@ -8,7 +8,7 @@
 
 use std::f64::consts::PI;
 
-mod common;
+use crate::common;
 
 use cleave::material::Material;
 use cleave::mesh::Plane;

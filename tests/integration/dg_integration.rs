@@ -5,7 +5,7 @@
 //! valid for non-convex, even not star-shaped, elements since the signed
 //! volumes cancel outside), and against closed forms.
 
-mod common;
+use crate::common;
 
 use cleave::material::Material;
 use cleave::mesh::{Plane, PolyMesh};

@@ -8,7 +8,7 @@ use cleave::mesh::{Cell, PolyMesh};
 use cleave::store::BasisOptions;
 use cleave::topology::merge_slivers;
 
-mod common;
+use crate::common;
 
 const MIN_QUALITY: f64 = 0.02;
 

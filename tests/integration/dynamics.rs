@@ -9,7 +9,7 @@ use cleave::meshing::{box_tet, random_convex};
 use cleave::sim::{Collider, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
 
-mod common;
+use crate::common;
 
 /// `p` rotated by `angle` (rad) about the unit `axis` through the origin
 /// (Rodrigues).

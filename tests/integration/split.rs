@@ -8,7 +8,7 @@ use cleave::meshing::{box_hex, box_tet, random_convex};
 use cleave::topology::{split_by_plane, split_elements_by_plane, SplitOptions};
 use proptest::prelude::*;
 
-mod common;
+use crate::common;
 
 /// Splits `mesh` and checks every invariant of a split.
 fn split_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {

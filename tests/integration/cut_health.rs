@@ -18,7 +18,7 @@ use faer::{Mat, Side};
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-mod common;
+use crate::common;
 
 /// What the cuts of a run left at worst.
 #[derive(Debug)]

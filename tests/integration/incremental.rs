@@ -18,7 +18,7 @@ use cleave::topology::{
 };
 use proptest::prelude::*;
 
-mod common;
+use crate::common;
 
 /// The store, pattern and mesh of one topology.
 struct System {

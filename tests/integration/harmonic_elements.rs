@@ -1,9 +1,9 @@
 //! Harmonic elements in the store and in simulations: the cube against the
 //! trilinear hexahedron, the patch test on a mesh mixing tetrahedra,
 //! hexahedra, convex and non-convex polyhedra (cantilever convergence is in
-//! `tests/convergence.rs`).
+//! `tests/integration/convergence.rs`).
 
-mod common;
+use crate::common;
 
 use cleave::material::Material;
 use cleave::mesh::Plane;

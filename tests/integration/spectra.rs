@@ -12,7 +12,7 @@ use cleave::meshing::{box_hex, box_l_prisms, box_tet, random_convex};
 use cleave::sim::{Simulation, SimulationParams};
 use cleave::store::{BasisOptions, ElementKind, ElementStore, Family, HarmonicOptions, QuadratureRule};
 
-mod common;
+use crate::common;
 
 fn material() -> Material {
     Material::new(1e5, 0.3, 1000.0).unwrap()

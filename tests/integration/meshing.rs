@@ -3,7 +3,7 @@
 //! surface; octree leaves meet without hanging nodes; both pass the patch
 //! test; bad surfaces are refused with one clear error each.
 
-mod common;
+use crate::common;
 
 use std::collections::HashMap;
 

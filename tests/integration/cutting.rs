@@ -8,7 +8,7 @@ use cleave::sim::{FixedRegion, Simulation, SimulationParams};
 use cleave::topology::{cut_by_plane, SplitOptions};
 use proptest::prelude::*;
 
-mod common;
+use crate::common;
 
 /// No sliver anywhere: split parts have at least `min_quality` (up to the
 /// snapping, which leaves a cap corner up to 1e-4 of an edge off the plane,

@@ -1,7 +1,7 @@
 //! Run guards: a run provoked to go wrong stops with a diagnosis naming
 //! the step, the quantity, its bound and where, and keeps its last good
 //! frame and a checkpoint; in `"warn"` mode it reports and goes on; the
-//! shipped scenes never trip them (tests/scenes.rs runs every one).
+//! shipped scenes never trip them (tests/integration/scenes.rs runs every one).
 
 use std::path::Path;
 

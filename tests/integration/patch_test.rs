@@ -7,7 +7,7 @@ use cleave::io::read_mesh;
 use cleave::meshing::box_tet;
 use cleave::store::{BasisOptions, QuadratureRule};
 
-mod common;
+use crate::common;
 
 #[test]
 fn patch_test_on_the_irregular_bunny_tet_mesh() {
