@@ -4,7 +4,7 @@
 //! `b = -[(λ + μ) ∇∇φ q + μ Δφ q]`. The L2 error of interior penalty falls
 //! as `h²` for degree 1 and `h³` for degree 2 (fitted over three meshes,
 //! asserted within 0.2) on grids and on grids cut into convex cells of
-//! many shapes; Babuška–Zlámal's rates are printed.
+//! many shapes.
 
 use std::f64::consts::PI;
 
@@ -132,8 +132,10 @@ fn finest_rate(e: &[(f64, f64)]) -> f64 {
 /// tetrahedra (local rates 1.24, 1.70, 1.87 from 2³ to 12³ cubes for both;
 /// DG's errors are 2.2 times smaller), while the best approximation in the
 /// space converges at 2 from the start: linear polynomials are stiff in
-/// the shear a clamped bubble needs. On hexahedra (printed) they converge
-/// later still: 1.2 to 1.65 from 4³ to 16³.
+/// the shear a clamped bubble needs. On hexahedra they converge later
+/// still (measured: 1.2 to 1.65 from 4³ to 16³); Babuška–Zlámal's flux,
+/// not consistent, does not converge (measured: rate -0.13 from 2³ to 8³
+/// tetrahedral cubes). Neither is asserted.
 #[test]
 fn interior_penalty_converges_at_order_p_plus_one_in_l2() {
     type Case = (&'static str, fn(usize) -> PolyMesh, usize, &'static [usize]);
@@ -160,8 +162,4 @@ fn interior_penalty_converges_at_order_p_plus_one_in_l2() {
     for ((a, h), (b, _)) in tets_errors.iter().zip(cut_errors) {
         assert!(*b < 1.2 * a, "h = {h:.3}: cut {b:.3e} vs uncut {a:.3e}");
     }
-    let e = errors(hexes, &[4, 8, 16], 1, Flux::Ip);
-    println!("IP degree 1 on hexahedra (late): {e:?}, rate {:.2}, finest {:.2}", rate(&e), finest_rate(&e));
-    let e = errors(tets, &[2, 4, 8], 1, Flux::Bz);
-    println!("BZ degree 1 on tetrahedra (not consistent): {e:?}, rate {:.2}", rate(&e));
 }
