@@ -6,7 +6,8 @@
 use cleave::mesh::PolyMesh;
 use cleave::meshing::{clipped_box, prism};
 use cleave::store::harmonic::{
-    element_basis, element_basis_measured, face_bases, star_point, ElementBasis, FitError, HarmonicOptions,
+    element_basis, element_basis_measured, face_bases, star_point, ElementBasis, EvaluationWork, FitError,
+    HarmonicOptions,
 };
 use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
 use cleave_kernels::harmonic::{evaluate, evaluate_scratch};
@@ -59,7 +60,8 @@ fn shortest_edge(mesh: &PolyMesh) -> f64 {
 
 /// Partition of unity and linear reproduction at `pts` (exact by the
 /// projected linear term) and the Lagrange property at the nodes (up to
-/// the fit error).
+/// the fit error); the element store's evaluation by matrix products
+/// agrees with the point-by-point kernel to rounding.
 fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Result<f64, TestCaseError> {
     let k = b.linear.len();
     let nodes: Vec<[f64; 3]> = mesh.elements[0].nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
@@ -68,6 +70,15 @@ fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Re
     let mut buf = MemBuffer::new(evaluate_scratch(b.functions().len()));
     evaluate(&b.functions(), pts, &mut phi, &mut grad, MemStack::new(&mut buf));
     let size = mesh.element_diameter(0);
+    let (mut phi_products, mut grad_products) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
+    b.evaluate(pts, &mut phi_products, &mut grad_products, &mut EvaluationWork::default());
+    let apart = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    prop_assert!(apart(&phi, &phi_products) < 1e-11, "values by products differ by {}", apart(&phi, &phi_products));
+    prop_assert!(
+        apart(&grad, &grad_products) < 1e-11 / size,
+        "gradients by products differ by {}",
+        apart(&grad, &grad_products)
+    );
     for q in 0..nq {
         let sum: f64 = (0..k).map(|a| phi[a * nq + q]).sum();
         prop_assert!((sum - 1.0).abs() < 1e-12, "partition of unity {sum}");

@@ -86,6 +86,7 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     let row_weights: Vec<f64> = (0..points).map(|i| if i < 24 { 10.0 } else { 1.0 }).collect();
     let mut column = vec![0.0; points];
     let reps = 10 * scale;
+    let gradient_centres = centres.clone();
     kernels.push(Kernel {
         name: "harmonic kernel column",
         size: format!("{reps} x {} centres x {points} points", centres.len()),
@@ -96,6 +97,34 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                 for _ in 0..reps {
                     for &c in &centres {
                         fill(coords, c, &row_weights, &mut column);
+                    }
+                }
+            });
+            ms
+        }),
+    });
+
+    // the kernel's value and gradient columns the element store multiplies
+    // by the weights: one run of 64 quadrature points, the same centres
+    let run = 64;
+    let run_coords: [Vec<f64>; 3] = std::array::from_fn(|d| (0..run).map(|i| 0.5 * noise(7 * i + d)).collect());
+    let mut columns = [vec![0.0; run], vec![0.0; run], vec![0.0; run], vec![0.0; run]];
+    let reps = 100 * scale;
+    kernels.push(Kernel {
+        name: "harmonic kernel gradient columns",
+        size: format!("{reps} x {} centres x {run} points", gradient_centres.len()),
+        run: Box::new(move |reference| {
+            let coords = [&run_coords[0][..], &run_coords[1][..], &run_coords[2][..]];
+            let fill = if reference {
+                harmonic::kernel_columns_with_gradient_scalar
+            } else {
+                harmonic::kernel_columns_with_gradient
+            };
+            let (ms, ()) = best_ms(3, || {
+                for _ in 0..reps {
+                    for &c in &gradient_centres {
+                        let [v, gx, gy, gz] = &mut columns;
+                        fill(coords, c, v, [gx, gy, gz]);
                     }
                 }
             });

@@ -26,8 +26,6 @@ mod face;
 mod mfs;
 
 use crate::param::ParamError;
-use cleave_kernels::dyn_stack::{MemBuffer, MemStack};
-use cleave_kernels::harmonic;
 use cleave_kernels::quadrature::{cone_rule, shift_gradients, volume_centroid};
 use cleave_kernels::tet::signed_volume;
 use cleave_kernels::{elasticity, vec3};
@@ -35,7 +33,7 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 
 pub(crate) use element::winding_number;
-pub use element::{element_basis, element_basis_measured, ElementBasis};
+pub use element::{element_basis, element_basis_measured, ElementBasis, EvaluationWork, POINT_RUN};
 pub use face::{FaceBasis, FaceFunction};
 pub use mfs::FitError;
 
@@ -245,8 +243,8 @@ struct Scratch {
     grad: Vec<f64>,
     gram: Vec<f64>,
     moments: Vec<[f64; 3]>,
-    /// The basis kernel's workspace.
-    stack: MemBuffer,
+    /// The basis evaluation's workspace.
+    evaluation: EvaluationWork,
 }
 
 /// Builds the batch of `k`-node harmonic elements `elements`; `faces` holds
@@ -300,7 +298,7 @@ pub(super) fn build_batch(
         grad: vec![0.0; 3 * k * nq],
         gram: vec![0.0; elasticity::stiffness_scratch_len(k, nq)],
         moments: vec![[0.0; 3]; k],
-        stack: MemBuffer::new(harmonic::evaluate_scratch(k)),
+        evaluation: EvaluationWork::default(),
     };
     fill_batch(mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
         let Slots { element, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
@@ -325,7 +323,7 @@ pub(super) fn build_batch(
             Some(fit) => fit.translated(shift),
             None => element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?,
         };
-        harmonic::evaluate(&basis.functions(), points, &mut s.phi, &mut s.grad, MemStack::new(&mut s.stack));
+        basis.evaluate(points, &mut s.phi, &mut s.grad, &mut s.evaluation);
         boundary_moments(mesh, element, faces, &mut s.moments);
         shift_gradients(weights, &mut s.grad, &s.moments);
         elasticity::element_stiffness(&s.grad, weights, k, lambda, mu, &mut s.gram, stiffness);
