@@ -8,6 +8,7 @@ mod cg;
 mod cholesky;
 mod coarse;
 mod envelope;
+mod history;
 mod ordering;
 mod tree_solve;
 

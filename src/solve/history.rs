@@ -1,0 +1,295 @@
+//! The start of an iterative solve from the corrections of the solves
+//! before it (the projection of Fischer 1998, "Projection techniques for
+//! iterative solution of Ax = b with successive right-hand sides").
+//!
+//! A step's system changes little from one step to the next, and so does
+//! what its solve adds to the caller's guess: the best start in the span
+//! of the last few such corrections `V = [v_1 … v_s]` takes much of the
+//! next one's error away before the first iteration. With `r = b - A x`
+//! the residual of the guess, the correction `V y` with `(Vᵀ A V) y = Vᵀ
+//! r` makes the new error the smallest in the energy norm over `x + span
+//! V` (so never larger than the guess's own). It costs one product per
+//! kept correction and two passes over the vectors; the matrix is the
+//! current one, so nothing is assumed of how it changed. A correction
+//! whose part energy-orthogonal to the older ones is below [`DEPENDENT`]
+//! of its own energy adds nothing and is left out of the solve.
+//!
+//! Every sum runs over fixed chunks and the chunk sums in order, so the
+//! start has the same bits on any number of threads; the buffers are sized
+//! with the unknowns, so a solve allocates nothing.
+
+use rayon::prelude::*;
+
+/// The most corrections a history keeps.
+pub(super) const MOST_KEPT: usize = 8;
+
+/// Values per chunk of the fused passes.
+const CHUNK: usize = 4096;
+
+/// A correction is left out of the solve when the square of its part
+/// energy-orthogonal to the older ones is at most this fraction of its
+/// energy `vᵀ A v`.
+const DEPENDENT: f64 = 1e-10;
+
+/// The last corrections of a solver's solves, kept until its unknowns
+/// change.
+#[derive(Default)]
+pub(super) struct SolutionHistory {
+    /// The most corrections kept (at most [`MOST_KEPT`]).
+    capacity: usize,
+    /// `capacity` buffers of the unknowns' length; the first `len` hold
+    /// corrections, the oldest at `next` once all are full.
+    corrections: Vec<Vec<f64>>,
+    len: usize,
+    next: usize,
+    /// `A v_i` for the current matrix, made by each projection.
+    products: Vec<Vec<f64>>,
+    /// The guess the current solve started from.
+    start: Vec<f64>,
+    /// Per-chunk sums of `Vᵀ A V` (lower triangle, row by row) and `Vᵀ r`.
+    partial: Vec<f64>,
+}
+
+/// Entries of the lower triangle of `Vᵀ A V` and of `Vᵀ r` for `s` corrections.
+const fn sums_len(s: usize) -> usize {
+    s * (s + 1) / 2 + s
+}
+
+impl SolutionHistory {
+    /// A history keeping up to `capacity` corrections (at most
+    /// [`MOST_KEPT`]; none: no projection).
+    pub fn new(capacity: usize) -> Self {
+        SolutionHistory { capacity: capacity.min(MOST_KEPT), ..Default::default() }
+    }
+
+    /// Forgets every correction and sizes the buffers for `n` unknowns
+    /// (reusing their storage).
+    pub fn resize(&mut self, n: usize) {
+        (self.len, self.next) = (0, 0);
+        for buffers in [&mut self.corrections, &mut self.products] {
+            buffers.resize_with(self.capacity, Vec::new);
+            buffers.iter_mut().for_each(|v| v.resize(n, 0.0));
+        }
+        self.start.resize(n, 0.0);
+        self.partial.resize(n.div_ceil(CHUNK) * sums_len(self.capacity), 0.0);
+    }
+
+    /// Notes the guess `x` a solve starts from.
+    pub fn begin(&mut self, x: &[f64]) {
+        if self.capacity > 0 && x.len() == self.start.len() {
+            self.start.copy_from_slice(x);
+        }
+    }
+
+    /// Keeps the correction from the guess noted by [`begin`] to the
+    /// solution `x`, in place of the oldest when full.
+    ///
+    /// [`begin`]: SolutionHistory::begin
+    pub fn record(&mut self, x: &[f64]) {
+        if self.capacity == 0 || x.len() != self.start.len() {
+            return;
+        }
+        let slot = match self.len < self.capacity {
+            true => self.len,
+            false => self.next,
+        };
+        let kept = &mut self.corrections[slot];
+        kept.par_iter_mut().zip(x).zip(&self.start).for_each(|((v, x), s)| *v = x - s);
+        if self.len < self.capacity {
+            self.len += 1;
+        } else {
+            self.next = (self.next + 1) % self.capacity;
+        }
+    }
+
+    /// Adds to `x` the correction `V y` of the module docs and takes `A V y`
+    /// from the residual `r` of `x`; `product(v, a_v)` writes `a_v = A v`.
+    /// Returns whether it did (not without corrections of `x`'s length, nor
+    /// when none has energy or the correction is not finite).
+    pub fn project(&mut self, mut product: impl FnMut(&[f64], &mut [f64]), x: &mut [f64], r: &mut [f64]) -> bool {
+        let s = self.len;
+        if s == 0 || x.len() != self.start.len() || r.len() != x.len() {
+            return false;
+        }
+        // oldest first
+        let order: [usize; MOST_KEPT] = std::array::from_fn(|k| (self.next + k) % s);
+        let order = &order[..s];
+        for &i in order {
+            product(&self.corrections[i], &mut self.products[i]);
+        }
+        let Some(y) = self.coefficients(order, r) else { return false };
+        let (corrections, products) = (&self.corrections, &self.products);
+        x.par_chunks_mut(CHUNK).zip(r.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (x, r))| {
+            let range = c * CHUNK..c * CHUNK + x.len();
+            for (&i, y) in order.iter().zip(&y) {
+                x.iter_mut().zip(&corrections[i][range.clone()]).for_each(|(x, v)| *x += y * v);
+                r.iter_mut().zip(&products[i][range.clone()]).for_each(|(r, a_v)| *r -= y * a_v);
+            }
+        });
+        true
+    }
+
+    /// The solution `y` of `(Vᵀ A V) y = Vᵀ r` for the corrections in
+    /// `order`, by a Cholesky factorisation that leaves out (`y_k = 0`) each
+    /// correction the module docs call dependent; `None` when all are, or
+    /// `y` is not finite.
+    fn coefficients(&mut self, order: &[usize], r: &[f64]) -> Option<[f64; MOST_KEPT]> {
+        let s = order.len();
+        let width = sums_len(s);
+        let (corrections, products) = (&self.corrections, &self.products);
+        let chunks = r.len().div_ceil(CHUNK);
+        self.partial[..chunks * width].par_chunks_mut(width).enumerate().for_each(|(c, sums)| {
+            let range = c * CHUNK..(c * CHUNK + CHUNK).min(r.len());
+            let dot = |a: &[f64], b: &[f64]| a[range.clone()].iter().zip(&b[range.clone()]).map(|(a, b)| a * b).sum();
+            let mut at = 0;
+            for (k, &i) in order.iter().enumerate() {
+                for &j in &order[..=k] {
+                    sums[at] = dot(&corrections[i], &products[j]);
+                    at += 1;
+                }
+            }
+            for (k, &i) in order.iter().enumerate() {
+                sums[at + k] = dot(&corrections[i], r);
+            }
+        });
+        let mut total = [0.0f64; sums_len(MOST_KEPT)];
+        for sums in self.partial[..chunks * width].chunks_exact(width) {
+            total.iter_mut().zip(sums).for_each(|(t, s)| *t += s);
+        }
+        // the lower triangle of Vᵀ A V, factored in place: row k's entries
+        // at k (k + 1) / 2 ..
+        let at = |k: usize, j: usize| k * (k + 1) / 2 + j;
+        let (mut l, rhs) = (total, &total[s * (s + 1) / 2..width]);
+        let mut kept = [false; MOST_KEPT];
+        for k in 0..s {
+            let energy = total[at(k, k)];
+            for j in 0..k {
+                let sum: f64 = (0..j).filter(|&q| kept[q]).map(|q| l[at(k, q)] * l[at(j, q)]).sum();
+                l[at(k, j)] = if kept[j] { (l[at(k, j)] - sum) / l[at(j, j)] } else { 0.0 };
+            }
+            let pivot = energy - (0..k).filter(|&q| kept[q]).map(|q| l[at(k, q)] * l[at(k, q)]).sum::<f64>();
+            kept[k] = energy > 0.0 && pivot > DEPENDENT * energy;
+            l[at(k, k)] = if kept[k] { pivot.sqrt() } else { 0.0 };
+        }
+        if !kept.iter().any(|&k| k) {
+            return None;
+        }
+        // L z = Vᵀ r, then Lᵀ y = z, over the kept corrections
+        let mut y = [0.0f64; MOST_KEPT];
+        for k in (0..s).filter(|&k| kept[k]) {
+            let sum: f64 = (0..k).filter(|&q| kept[q]).map(|q| l[at(k, q)] * y[q]).sum();
+            y[k] = (rhs[k] - sum) / l[at(k, k)];
+        }
+        for k in (0..s).rev().filter(|&k| kept[k]) {
+            let sum: f64 = (k + 1..s).filter(|&q| kept[q]).map(|q| l[at(q, k)] * y[q]).sum();
+            y[k] = (y[k] - sum) / l[at(k, k)];
+        }
+        y.iter().all(|y| y.is_finite()).then_some(y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The diagonal matrix `diag(1, 2, …, n)` as a product.
+    fn diagonal(v: &[f64], a_v: &mut [f64]) {
+        a_v.iter_mut().zip(v).enumerate().for_each(|(i, (y, x))| *y = (i + 1) as f64 * x);
+    }
+
+    /// A history of `capacity` for `n` unknowns holding the corrections
+    /// `kept` (each recorded from a zero guess).
+    fn history_of(capacity: usize, n: usize, kept: &[Vec<f64>]) -> SolutionHistory {
+        let mut history = SolutionHistory::new(capacity);
+        history.resize(n);
+        for v in kept {
+            history.begin(&vec![0.0; n]);
+            history.record(v);
+        }
+        history
+    }
+
+    /// `n` values of a smooth function, the `k`-th of a family.
+    fn wave(n: usize, k: usize) -> Vec<f64> {
+        (0..n).map(|i| ((i * (k + 2)) as f64 * 0.01).sin() + 0.1 * k as f64).collect()
+    }
+
+    #[test]
+    fn a_solution_in_the_span_of_the_history_is_found_at_once() {
+        let n = 10_000;
+        let kept: Vec<Vec<f64>> = (0..3).map(|k| wave(n, k)).collect();
+        let mut history = history_of(3, n, &kept);
+        // b = A (0.5 v0 - 2 v2), from x = 0: r = b
+        let solution: Vec<f64> = (0..n).map(|i| 0.5 * kept[0][i] - 2.0 * kept[2][i]).collect();
+        let mut r = vec![0.0; n];
+        diagonal(&solution, &mut r);
+        let mut x = vec![0.0; n];
+        assert!(history.project(diagonal, &mut x, &mut r));
+        let error = x.iter().zip(&solution).map(|(x, s)| (x - s).abs()).fold(0.0, f64::max);
+        let residual = r.iter().map(|r| r.abs()).fold(0.0, f64::max);
+        assert!(error < 1e-10 && residual < 1e-8, "error {error:e}, residual {residual:e}");
+    }
+
+    #[test]
+    fn the_correction_from_the_guess_is_kept() {
+        let n = 2000;
+        let mut history = history_of(2, n, &[]);
+        let guess = wave(n, 1);
+        let solution: Vec<f64> = guess.iter().zip(wave(n, 4)).map(|(g, w)| g + 3.0 * w).collect();
+        history.begin(&guess);
+        history.record(&solution);
+        assert_eq!(history.len, 1);
+        let kept = &history.corrections[0];
+        let error = kept.iter().zip(wave(n, 4)).map(|(v, w)| (v - 3.0 * w).abs()).fold(0.0, f64::max);
+        assert!(error < 1e-14, "error {error:e}");
+    }
+
+    #[test]
+    fn dependent_corrections_and_a_full_history_are_handled() {
+        let n = 5000;
+        let v = wave(n, 5);
+        // the same correction three times: the oldest is overwritten, and
+        // the two kept span one direction
+        let mut history = history_of(2, n, &[v.clone(), v.clone(), v.clone()]);
+        assert_eq!((history.len, history.next), (2, 1));
+        let mut r = vec![0.0; n];
+        diagonal(&v, &mut r);
+        r.iter_mut().for_each(|r| *r *= 3.0);
+        let mut x = vec![0.0; n];
+        assert!(history.project(diagonal, &mut x, &mut r));
+        let error = x.iter().zip(&v).map(|(x, v)| (x - 3.0 * v).abs()).fold(0.0, f64::max);
+        assert!(error < 1e-9, "error {error:e}");
+        // unknowns of another length: no projection, nothing touched
+        let (mut short_x, mut short_r) = (vec![1.0; 10], vec![2.0; 10]);
+        assert!(!history.project(diagonal, &mut short_x, &mut short_r));
+        assert_eq!((short_x, short_r), (vec![1.0; 10], vec![2.0; 10]));
+        // a matrix with no energy along the history: no projection
+        let mut x = vec![0.0; n];
+        assert!(!history.project(|_, a_v| a_v.fill(0.0), &mut x, &mut r));
+        // resized for other unknowns: nothing kept
+        history.resize(n + 1);
+        let (mut x, mut r) = (vec![0.0; n + 1], vec![1.0; n + 1]);
+        assert!(!history.project(diagonal, &mut x, &mut r));
+    }
+
+    #[test]
+    fn the_projection_leaves_a_residual_orthogonal_to_the_history() {
+        // with a history that cannot hold the solution, the corrected error
+        // has no smaller energy along any kept direction (the Galerkin
+        // condition: the new residual is orthogonal to every correction)
+        let n = 3000;
+        let kept: Vec<Vec<f64>> = (0..4).map(|k| wave(n, 3 * k)).collect();
+        let mut history = history_of(4, n, &kept);
+        let solution: Vec<f64> = (0..n).map(|i| (i as f64 * 0.011).cos()).collect();
+        let mut r = vec![0.0; n];
+        diagonal(&solution, &mut r);
+        let norm_before: f64 = r.iter().map(|r| r * r).sum::<f64>().sqrt();
+        let mut x = vec![0.0; n];
+        assert!(history.project(diagonal, &mut x, &mut r));
+        for v in &kept {
+            let along: f64 = v.iter().zip(&r).map(|(v, r)| v * r).sum();
+            let scale = norm_before * v.iter().map(|v| v * v).sum::<f64>().sqrt();
+            assert!(along.abs() < 1e-10 * scale, "v · r = {along:e} against {scale:e}");
+        }
+    }
+}
