@@ -50,8 +50,8 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 /// 86 iterations per step with block Jacobi alone to 1.6 at a relative
 /// residual of 1e-6 (5.5 at 1e-8): its motion is nearly rigid. With its
 /// base clamped, sagging and swaying, the body deforms and the step takes
-/// 86 iterations at 1e-6 and 140 at 1e-8 from that start, 50 and 92 from
-/// the span of the last corrections ([`KEPT_CORRECTIONS`]); more
+/// 86 iterations at 1e-6 and 140 at 1e-8 from that start, 55 and 97 from
+/// the span of the last 8 corrections (`history.rs`); more
 /// aggregates barely help (about 250 of them: 67 iterations without the
 /// history, at a dense coarse factor that costs more than the iterations
 /// it saves).
@@ -103,12 +103,15 @@ pub struct ConjugateGradient {
     history: SolutionHistory,
 }
 
-/// Corrections a solver keeps to start the next solve from. On bunny_100k
-/// (`cleave bench --only steps`), 8 took the steps with its base clamped
-/// from 85 to 50 iterations at 1e-6 and from 139 to 92 at 1e-8, falling
-/// onto a plane from 1.6 to 1.0 and from 5.5 to 2.9, for 8 products per
-/// step. (A first version measured 4: 55 and 108 clamped; 12: 49 and 96;
-/// and whole solutions kept instead of corrections, 8: 57 and 111.)
+/// Corrections a solver keeps to start the next solve from. Over 31
+/// steps of bunny_100k as `cleave bench` steps it (AMD EPYC, 2 cores), 8
+/// took the body with its base clamped from 85 to 55 iterations per step
+/// at 1e-6 and from 139 to 97 at 1e-8 (50 and 92 when every solve
+/// projects, without [`super::history::WORTH`]'s test), falling onto a
+/// plane from 1.6 to 1.0 and from 5.5 to 2.9, for 8 products per
+/// projecting step. (A first version measured 4: 55 and 108 clamped; 12:
+/// 49 and 96; and whole solutions kept instead of corrections, 8: 57 and
+/// 111.)
 const KEPT_CORRECTIONS: usize = 8;
 
 /// The 3x3 block structure of a matrix in the layout of
@@ -374,10 +377,12 @@ impl ConjugateGradient {
         let (mut iterations, mut exact) = (0, !self.rounded);
         let mut norm_r = self.exact_residual(b, x);
         self.history.begin(x);
-        if norm_r > goal && self.project_on_history(exact, x) {
+        if norm_r > goal && self.history.wanted() && self.project_on_history(exact, x) {
             // (the projection's products read the values the iteration
             // reads: its residual counts once the exact one confirms it)
+            let before = norm_r;
             norm_r = dot(&self.r, &self.r).sqrt();
+            self.history.judge(norm_r / before);
             if norm_r <= goal {
                 norm_r = self.exact_residual(b, x);
             }
@@ -973,7 +978,10 @@ mod tests {
         let n = pattern.nrows();
         let matrix = SparseColMatRef::new(pattern.as_ref(), &values);
         let load = |phase: f64| -> Vec<f64> { (0..n).map(|i| (i as f64 * 0.013 + phase).sin()).collect() };
+        // (b₂ close to a multiple of b₁: the projection of its solve pays,
+        // so the history does not sit out the third)
         let (b1, b2) = (load(0.0), load(0.7));
+        let b2: Vec<f64> = b1.iter().zip(&b2).map(|(b1, b2)| 1.5 * b1 + 0.01 * b2).collect();
         let b3: Vec<f64> = b1.iter().zip(&b2).map(|(b1, b2)| 2.0 * b2 - b1).collect();
         let solve = |cg: &mut ConjugateGradient, b: &[f64]| {
             let mut x = vec![0.0; n];
