@@ -27,7 +27,7 @@
 //! the CG step with its base clamped from 102 to 87 iterations (the
 //! aggregates follow the order too) and its solve from about 140 to 63 ms.
 
-use cleave_kernels::spmv::{block_products, BlockColumns, Value};
+use cleave_kernels::spmv::{block_products, block_products_of_vectors, BlockColumns, Value, VECTORS};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
@@ -108,8 +108,9 @@ pub struct ConjugateGradient {
 /// took the body with its base clamped from 85 to 55 iterations per step
 /// at 1e-6 and from 139 to 97 at 1e-8 (50 and 92 when every solve
 /// projects, without [`super::history::WORTH`]'s test), falling onto a
-/// plane from 1.6 to 1.0 and from 5.5 to 2.9, for 8 products per
-/// projecting step. (A first version measured 4: 55 and 108 clamped; 12:
+/// plane from 1.6 to 1.0 and from 5.5 to 2.9, for one product of 8
+/// vectors (1.2 to 1.5 ms there, against 2.8 to 3.0 ms for 8 products of
+/// one) and two passes, about 2.2 ms, per projecting step. (A first version measured 4: 55 and 108 clamped; 12:
 /// 49 and 96; and whole solutions kept instead of corrections, 8: 57 and
 /// 111.)
 const KEPT_CORRECTIONS: usize = 8;
@@ -415,16 +416,17 @@ impl ConjugateGradient {
     /// the `f64` values when `exact`, else on the rounded ones; returns
     /// whether they moved.
     fn project_on_history(&mut self, exact: bool, x: &mut [f64]) -> bool {
-        let (mut history, mut r, mut partial) =
-            (std::mem::take(&mut self.history), std::mem::take(&mut self.r), std::mem::take(&mut self.partial));
-        let product = |v: &[f64], a_v: &mut [f64]| {
-            match exact {
-                true => self.matvec(&self.values, v, a_v, &mut partial),
-                false => self.matvec(&self.values32, v, a_v, &mut partial),
-            };
+        let (mut history, mut r) = (std::mem::take(&mut self.history), std::mem::take(&mut self.r));
+        let structure = self.numbering.blocks().columns();
+        let products = |v: &[f64], a_v: &mut [f64]| {
+            let chunks = a_v.par_chunks_mut(3 * VECTORS * CHUNK_BLOCKS).enumerate();
+            chunks.for_each(|(c, a_v)| match exact {
+                true => block_products_of_vectors(structure, &self.values, v, c * CHUNK_BLOCKS, a_v),
+                false => block_products_of_vectors(structure, &self.values32, v, c * CHUNK_BLOCKS, a_v),
+            });
         };
-        let moved = history.project(product, x, &mut r);
-        (self.history, self.r, self.partial) = (history, r, partial);
+        let moved = history.project(products, x, &mut r);
+        (self.history, self.r) = (history, r);
         moved
     }
 

@@ -8,9 +8,10 @@
 //! next one's error away before the first iteration. With `r = b - A x`
 //! the residual of the guess, the correction `V y` with `(Vᵀ A V) y = Vᵀ
 //! r` makes the new error the smallest in the energy norm over `x + span
-//! V` (so never larger than the guess's own). It costs one product per
-//! kept correction and two passes over the vectors; the matrix is the
-//! current one, so nothing is assumed of how it changed. A correction
+//! V` (so never larger than the guess's own). The corrections are stored
+//! interleaved, so that one read of the matrix makes all their products
+//! ([`block_products_of_vectors`]), and two passes over them do the rest;
+//! the matrix is the current one, so nothing is assumed of how it changed. A correction
 //! whose part energy-orthogonal to the older ones is below [`DEPENDENT`]
 //! of its own energy adds nothing and is left out of the solve.
 //!
@@ -25,15 +26,19 @@
 //! start has the same bits on any number of threads; the buffers are sized
 //! with the unknowns, so a solve allocates nothing.
 
+use cleave_kernels::spmv::VECTORS;
 use rayon::prelude::*;
 
-/// The most corrections a history keeps.
-pub(super) const MOST_KEPT: usize = 8;
+#[cfg(doc)]
+use cleave_kernels::spmv::block_products_of_vectors;
+
+/// The most corrections a history keeps: as many as one product takes.
+pub(super) const MOST_KEPT: usize = VECTORS;
 
 /// A projection pays when it leaves at most this fraction of the
-/// residual's norm: its products cost about as much as four iterations,
-/// and ten times smaller a residual saves some fifteen of a deforming
-/// bunny_100k's (bouncing on the floor, its projections mostly left half
+/// residual's norm: its products and passes cost about as much as two
+/// iterations, and ten times smaller a residual saves some fifteen of a
+/// deforming bunny_100k's (bouncing on the floor, its projections mostly left half
 /// or more, and the steps took 60.7 iterations with them against 61.5
 /// without).
 pub(super) const WORTH: f64 = 0.1;
@@ -55,13 +60,15 @@ const DEPENDENT: f64 = 1e-10;
 pub(super) struct SolutionHistory {
     /// The most corrections kept (at most [`MOST_KEPT`]).
     capacity: usize,
-    /// `capacity` buffers of the unknowns' length; the first `len` hold
-    /// corrections, the oldest at `next` once all are full.
-    corrections: Vec<Vec<f64>>,
+    /// The corrections, interleaved: entry `i` of the one in slot `k` at
+    /// `[MOST_KEPT * i + k]`; slots `0..len` hold corrections (the oldest
+    /// at `next` once all are full), the others zeros.
+    corrections: Vec<f64>,
     len: usize,
     next: usize,
-    /// `A v_i` for the current matrix, made by each projection.
-    products: Vec<Vec<f64>>,
+    /// `A v` of each slot for the current matrix, interleaved the same
+    /// way, made by each projection.
+    products: Vec<f64>,
     /// The guess the current solve started from.
     start: Vec<f64>,
     /// Per-chunk sums of `Vᵀ A V` (lower triangle, row by row) and `Vᵀ r`.
@@ -69,6 +76,12 @@ pub(super) struct SolutionHistory {
     /// Solves left to sit out, and how many the next failure sits out.
     skipped: usize,
     backoff: usize,
+}
+
+/// The slots of the unknowns `range` of interleaved vectors `a`, one
+/// unknown at a time.
+fn unknowns(a: &[f64], range: std::ops::Range<usize>) -> std::slice::ChunksExact<'_, f64> {
+    a[MOST_KEPT * range.start..MOST_KEPT * range.end].chunks_exact(MOST_KEPT)
 }
 
 /// Entries of the lower triangle of `Vᵀ A V` and of `Vᵀ r` for `s` corrections.
@@ -87,9 +100,9 @@ impl SolutionHistory {
     /// (reusing their storage).
     pub fn resize(&mut self, n: usize) {
         (self.len, self.next, self.skipped, self.backoff) = (0, 0, 0, 0);
-        for buffers in [&mut self.corrections, &mut self.products] {
-            buffers.resize_with(self.capacity, Vec::new);
-            buffers.iter_mut().for_each(|v| v.resize(n, 0.0));
+        for buffer in [&mut self.corrections, &mut self.products] {
+            buffer.clear();
+            buffer.resize(MOST_KEPT * n, 0.0);
         }
         self.start.resize(n, 0.0);
         self.partial.resize(n.div_ceil(CHUNK) * sums_len(self.capacity), 0.0);
@@ -114,8 +127,10 @@ impl SolutionHistory {
             true => self.len,
             false => self.next,
         };
-        let kept = &mut self.corrections[slot];
-        kept.par_iter_mut().zip(x).zip(&self.start).for_each(|((v, x), s)| *v = x - s);
+        let kept = self.corrections.par_chunks_mut(MOST_KEPT * CHUNK).zip(x.par_chunks(CHUNK));
+        kept.zip(self.start.par_chunks(CHUNK)).for_each(|((v, x), start)| {
+            v.chunks_exact_mut(MOST_KEPT).zip(x).zip(start).for_each(|((v, x), s)| v[slot] = x - s);
+        });
         if self.len < self.capacity {
             self.len += 1;
         } else {
@@ -143,27 +158,31 @@ impl SolutionHistory {
     }
 
     /// Adds to `x` the correction `V y` of the module docs and takes `A V y`
-    /// from the residual `r` of `x`; `product(v, a_v)` writes `a_v = A v`.
-    /// Returns whether it did (not without corrections of `x`'s length, nor
-    /// when none has energy or the correction is not finite).
-    pub fn project(&mut self, mut product: impl FnMut(&[f64], &mut [f64]), x: &mut [f64], r: &mut [f64]) -> bool {
+    /// from the residual `r` of `x`; `products(v, a_v)` writes `A v` of
+    /// every slot of the interleaved `v` into `a_v`, interleaved the same
+    /// way. Returns whether it did (not without corrections of `x`'s
+    /// length, nor when none has energy or the correction is not finite).
+    pub fn project(&mut self, products: impl FnOnce(&[f64], &mut [f64]), x: &mut [f64], r: &mut [f64]) -> bool {
         let s = self.len;
         if s == 0 || x.len() != self.start.len() || r.len() != x.len() {
             return false;
         }
-        // oldest first
+        products(&self.corrections, &mut self.products);
+        // the slots oldest first
         let order: [usize; MOST_KEPT] = std::array::from_fn(|k| (self.next + k) % s);
-        let order = &order[..s];
-        for &i in order {
-            product(&self.corrections[i], &mut self.products[i]);
-        }
-        let Some(y) = self.coefficients(order, r) else { return false };
+        let Some(y) = self.coefficients(&order[..s], r) else { return false };
+        // the coefficient of each slot
+        let mut by_slot = [0.0; MOST_KEPT];
+        order[..s].iter().zip(&y).for_each(|(&slot, &y)| by_slot[slot] = y);
         let (corrections, products) = (&self.corrections, &self.products);
-        x.par_chunks_mut(CHUNK).zip(r.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (x, r))| {
-            let range = c * CHUNK..c * CHUNK + x.len();
-            for (&i, y) in order.iter().zip(&y) {
-                x.iter_mut().zip(&corrections[i][range.clone()]).for_each(|(x, v)| *x += y * v);
-                r.iter_mut().zip(&products[i][range.clone()]).for_each(|(r, a_v)| *r -= y * a_v);
+        let vectors = corrections.par_chunks(MOST_KEPT * CHUNK).zip(products.par_chunks(MOST_KEPT * CHUNK));
+        x.par_chunks_mut(CHUNK).zip(r.par_chunks_mut(CHUNK)).zip(vectors).for_each(|((x, r), (v, a_v))| {
+            let rows = v.chunks_exact(MOST_KEPT).zip(a_v.chunks_exact(MOST_KEPT));
+            for ((x, r), (v, a_v)) in x.iter_mut().zip(r.iter_mut()).zip(rows) {
+                for k in 0..s {
+                    *x += by_slot[k] * v[k];
+                    *r -= by_slot[k] * a_v[k];
+                }
             }
         });
         true
@@ -180,16 +199,17 @@ impl SolutionHistory {
         let chunks = r.len().div_ceil(CHUNK);
         self.partial[..chunks * width].par_chunks_mut(width).enumerate().for_each(|(c, sums)| {
             let range = c * CHUNK..(c * CHUNK + CHUNK).min(r.len());
-            let dot = |a: &[f64], b: &[f64]| a[range.clone()].iter().zip(&b[range.clone()]).map(|(a, b)| a * b).sum();
+            let rows = |a| unknowns(a, range.clone());
+            let lanes = |a: usize, b: usize| rows(corrections).zip(rows(products)).map(|(v, a_v)| v[a] * a_v[b]).sum();
             let mut at = 0;
             for (k, &i) in order.iter().enumerate() {
                 for &j in &order[..=k] {
-                    sums[at] = dot(&corrections[i], &products[j]);
+                    sums[at] = lanes(i, j);
                     at += 1;
                 }
             }
             for (k, &i) in order.iter().enumerate() {
-                sums[at + k] = dot(&corrections[i], r);
+                sums[at + k] = rows(corrections).zip(&r[range.clone()]).map(|(v, r)| v[i] * r).sum();
             }
         });
         let mut total = [0.0f64; sums_len(MOST_KEPT)];
@@ -237,6 +257,13 @@ mod tests {
         a_v.iter_mut().zip(v).enumerate().for_each(|(i, (y, x))| *y = (i + 1) as f64 * x);
     }
 
+    /// [`diagonal`] of every slot of interleaved vectors.
+    fn diagonal_of_slots(v: &[f64], a_v: &mut [f64]) {
+        for (i, (y, x)) in a_v.chunks_exact_mut(MOST_KEPT).zip(v.chunks_exact(MOST_KEPT)).enumerate() {
+            y.iter_mut().zip(x).for_each(|(y, x)| *y = (i + 1) as f64 * x);
+        }
+    }
+
     /// A history of `capacity` for `n` unknowns holding the corrections
     /// `kept` (each recorded from a zero guess).
     fn history_of(capacity: usize, n: usize, kept: &[Vec<f64>]) -> SolutionHistory {
@@ -264,7 +291,7 @@ mod tests {
         let mut r = vec![0.0; n];
         diagonal(&solution, &mut r);
         let mut x = vec![0.0; n];
-        assert!(history.project(diagonal, &mut x, &mut r));
+        assert!(history.project(diagonal_of_slots, &mut x, &mut r));
         let error = x.iter().zip(&solution).map(|(x, s)| (x - s).abs()).fold(0.0, f64::max);
         let residual = r.iter().map(|r| r.abs()).fold(0.0, f64::max);
         assert!(error < 1e-10 && residual < 1e-8, "error {error:e}, residual {residual:e}");
@@ -279,8 +306,8 @@ mod tests {
         history.begin(&guess);
         history.record(&solution);
         assert_eq!(history.len, 1);
-        let kept = &history.corrections[0];
-        let error = kept.iter().zip(wave(n, 4)).map(|(v, w)| (v - 3.0 * w).abs()).fold(0.0, f64::max);
+        let kept = history.corrections.iter().step_by(MOST_KEPT);
+        let error = kept.zip(wave(n, 4)).map(|(v, w)| (v - 3.0 * w).abs()).fold(0.0, f64::max);
         assert!(error < 1e-14, "error {error:e}");
     }
 
@@ -296,12 +323,12 @@ mod tests {
         diagonal(&v, &mut r);
         r.iter_mut().for_each(|r| *r *= 3.0);
         let mut x = vec![0.0; n];
-        assert!(history.project(diagonal, &mut x, &mut r));
+        assert!(history.project(diagonal_of_slots, &mut x, &mut r));
         let error = x.iter().zip(&v).map(|(x, v)| (x - 3.0 * v).abs()).fold(0.0, f64::max);
         assert!(error < 1e-9, "error {error:e}");
         // unknowns of another length: no projection, nothing touched
         let (mut short_x, mut short_r) = (vec![1.0; 10], vec![2.0; 10]);
-        assert!(!history.project(diagonal, &mut short_x, &mut short_r));
+        assert!(!history.project(diagonal_of_slots, &mut short_x, &mut short_r));
         assert_eq!((short_x, short_r), (vec![1.0; 10], vec![2.0; 10]));
         // a matrix with no energy along the history: no projection
         let mut x = vec![0.0; n];
@@ -309,7 +336,7 @@ mod tests {
         // resized for other unknowns: nothing kept
         history.resize(n + 1);
         let (mut x, mut r) = (vec![0.0; n + 1], vec![1.0; n + 1]);
-        assert!(!history.project(diagonal, &mut x, &mut r));
+        assert!(!history.project(diagonal_of_slots, &mut x, &mut r));
     }
 
     #[test]
@@ -347,7 +374,7 @@ mod tests {
         diagonal(&solution, &mut r);
         let norm_before: f64 = r.iter().map(|r| r * r).sum::<f64>().sqrt();
         let mut x = vec![0.0; n];
-        assert!(history.project(diagonal, &mut x, &mut r));
+        assert!(history.project(diagonal_of_slots, &mut x, &mut r));
         for v in &kept {
             let along: f64 = v.iter().zip(&r).map(|(v, r)| v * r).sum();
             let scale = norm_before * v.iter().map(|v| v * v).sum::<f64>().sqrt();

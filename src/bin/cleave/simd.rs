@@ -242,6 +242,12 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     let values: Vec<f32> = (0..pattern.nnz()).map(|i| noise(i) as f32).collect();
     let x: Vec<f64> = (0..3 * pattern.num_blocks).map(|i| noise(i + 1)).collect();
     let mut y = vec![0.0; x.len()];
+    // (the same matrix times 8 vectors at once: the products of a CG
+    // solve's start from its history of corrections)
+    let (blocks_8, values_8) = (blocks.clone(), values.clone());
+    let x_8: Vec<f64> = (0..spmv::VECTORS * x.len()).map(|i| noise(i + 2)).collect();
+    let mut y_8 = vec![0.0; x_8.len()];
+    let size_8 = format!("K of box_tet {}x{}x{} times {} vectors", cells[0], cells[1], cells[2], spmv::VECTORS);
     kernels.push(Kernel::one_lane(
         "block sparse product",
         format!("K of box_tet {}x{}x{}, {} f32 values", cells[0], cells[1], cells[2], values.len()),
@@ -250,6 +256,11 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
             ms
         },
     ));
+    kernels.push(Kernel::one_lane("block sparse product of vectors", size_8, move || {
+        let columns = blocks_8.columns();
+        let (ms, ()) = best_ms(5 * scale, || spmv::block_products_of_vectors(columns, &values_8, &x_8, 0, &mut y_8));
+        ms
+    }));
 
     // the health check's spectra: the tetrahedra of that box in closed
     // form, and the K_e of an 8-vertex mean value element as a run of
