@@ -50,7 +50,7 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 /// 86 iterations per step with block Jacobi alone to 1.6 at a relative
 /// residual of 1e-6 (5.5 at 1e-8): its motion is nearly rigid. With its
 /// base clamped, sagging and swaying, the body deforms and the step takes
-/// 86 iterations at 1e-6 and 140 at 1e-8 from that start, 55 and 97 from
+/// 86 iterations at 1e-6 and 140 at 1e-8 from that start, 50 and 92 from
 /// the span of the last 8 corrections (`history.rs`); more
 /// aggregates barely help (about 250 of them: 67 iterations without the
 /// history, at a dense coarse factor that costs more than the iterations
@@ -105,9 +105,9 @@ pub struct ConjugateGradient {
 
 /// Corrections a solver keeps to start the next solve from. Over 31
 /// steps of bunny_100k as `cleave bench` steps it (AMD EPYC, 2 cores), 8
-/// took the body with its base clamped from 85 to 55 iterations per step
-/// at 1e-6 and from 139 to 97 at 1e-8 (50 and 92 when every solve
-/// projects, without [`super::history::WORTH`]'s test), falling onto a
+/// took the body with its base clamped from 85 to 50 iterations per step
+/// at 1e-6 and from 139 to 92 at 1e-8 (55 and 97 when a young history was
+/// judged by [`super::history::WORTH`] too), falling onto a
 /// plane from 1.6 to 1.0 and from 5.5 to 2.9, for one product of 8
 /// vectors (1.2 to 1.5 ms there, against 2.8 to 3.0 ms for 8 products of
 /// one) and two passes, about 2.2 ms, per projecting step. (A first version measured 4: 55 and 108 clamped; 12:

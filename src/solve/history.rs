@@ -17,10 +17,10 @@
 //!
 //! Where the history does not predict the next correction (a body
 //! bouncing on penalty contacts, whose active set changes from step to
-//! step), its products are wasted: a projection that leaves more than
-//! [`WORTH`] of the residual makes the history sit out the next solve,
-//! then two, four, up to [`MOST_SKIPPED`], until one pays again (the
-//! corrections are still kept meanwhile).
+//! step), its products are wasted: once the history is full, a projection
+//! that leaves more than [`WORTH`] of the residual makes it sit out the
+//! next solve, then two, four, up to [`MOST_SKIPPED`], until one pays
+//! again (the corrections are still kept meanwhile).
 //!
 //! Every sum runs over fixed chunks and the chunk sums in order, so the
 //! start has the same bits on any number of threads; the buffers are sized
@@ -147,8 +147,13 @@ impl SolutionHistory {
         self.len > 0
     }
 
-    /// Takes note of how much of the residual's norm a projection left.
+    /// Takes note of how much of the residual's norm a projection left (a
+    /// history not yet full is not judged: its newest corrections are the
+    /// ones that predict).
     pub fn judge(&mut self, left: f64) {
+        if self.len < self.capacity {
+            return;
+        }
         if left <= WORTH {
             self.backoff = 0;
         } else {
@@ -343,6 +348,9 @@ mod tests {
     fn a_history_that_does_not_pay_sits_out_more_and_more_solves() {
         let n = 100;
         let mut history = history_of(2, n, &[wave(n, 1)]);
+        history.judge(0.5);
+        assert!(history.wanted(), "a history not yet full is not judged");
+        history.record(&wave(n, 2));
         let mut pattern = Vec::new();
         for left in [0.5, 0.5, 0.5, 0.01, 0.5] {
             while !history.wanted() {
