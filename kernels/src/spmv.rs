@@ -59,7 +59,7 @@ pub fn block_products<T: Value>(
     first: usize,
     y: &mut [f64],
 ) -> f64 {
-    dispatch(Products { structure, values, x, first, y })
+    dispatch(Products(Operands { structure, values, x, first, y }))
 }
 
 /// Lanes of the running sums of a column's dot product (the width of an
@@ -69,7 +69,9 @@ const LANES: usize = 8;
 /// Block rows gathered at a time (a column's `x` entries on the stack).
 const SEGMENT: usize = 64;
 
-struct Products<'a, T> {
+/// A product's operands: `y` takes the block columns `first..` of
+/// `values` on `structure` times `x`.
+struct Operands<'a, T> {
     structure: BlockColumns<'a>,
     values: &'a [T],
     x: &'a [f64],
@@ -77,19 +79,31 @@ struct Products<'a, T> {
     y: &'a mut [f64],
 }
 
+impl<'a> BlockColumns<'a> {
+    /// Block column `j`'s block rows and values (scalar column `c` at
+    /// `[c * 3 rows..(c + 1) * 3 rows]`).
+    #[inline(always)]
+    fn column<'v, T>(&self, j: usize, values: &'v [T]) -> (&'a [u32], &'v [T]) {
+        let rows = &self.rows[self.ptr[j] as usize..self.ptr[j + 1] as usize];
+        (rows, &values[self.start[j]..self.start[j] + 9 * rows.len()])
+    }
+}
+
+/// The product with one vector.
+struct Products<'a, T>(Operands<'a, T>);
+
 impl<T: Value> pulp::WithSimd for Products<'_, T> {
     type Output = f64;
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
-        let Products { structure, values, x, first, y } = self;
+        let Operands { structure, values, x, first, y } = self.0;
         let mut dot = 0.0;
         let mut gathered = [0.0f64; 3 * SEGMENT];
         for (q, yj) in y.chunks_exact_mut(3).enumerate() {
             let j = first + q;
-            let rows = &structure.rows[structure.ptr[j] as usize..structure.ptr[j + 1] as usize];
+            let (rows, column) = structure.column(j, values);
             let stride = 3 * rows.len();
-            let column = &values[structure.start[j]..structure.start[j] + 3 * stride];
             let mut acc = [[0.0f64; LANES]; 3];
             for (s, segment) in rows.chunks(SEGMENT).enumerate() {
                 let n = 3 * segment.len();
@@ -139,28 +153,21 @@ pub fn block_products_of_vectors<T: Value>(
     first: usize,
     y: &mut [f64],
 ) {
-    dispatch(VectorProducts { structure, values, x, first, y })
+    dispatch(VectorProducts(Operands { structure, values, x, first, y }))
 }
 
-struct VectorProducts<'a, T> {
-    structure: BlockColumns<'a>,
-    values: &'a [T],
-    x: &'a [f64],
-    first: usize,
-    y: &'a mut [f64],
-}
+/// The product with [`VECTORS`] interleaved vectors.
+struct VectorProducts<'a, T>(Operands<'a, T>);
 
 impl<T: Value> pulp::WithSimd for VectorProducts<'_, T> {
     type Output = ();
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        let VectorProducts { structure, values, x, first, y } = self;
+        let Operands { structure, values, x, first, y } = self.0;
         for (q, yj) in y.chunks_exact_mut(3 * VECTORS).enumerate() {
-            let j = first + q;
-            let rows = &structure.rows[structure.ptr[j] as usize..structure.ptr[j + 1] as usize];
+            let (rows, column) = structure.column(first + q, values);
             let stride = 3 * rows.len();
-            let column = &values[structure.start[j]..structure.start[j] + 3 * stride];
             // acc[c]: scalar column c's sums (three independent chains of
             // additions, which AVX2's sixteen registers hold too)
             let mut acc = [[0.0f64; VECTORS]; 3];
@@ -260,13 +267,13 @@ mod tests {
                 let (head, tail) = y.split_at_mut(9 * VECTORS);
                 crate::lanes::levels::run(
                     level,
-                    VectorProducts { structure, values: &values, x: &x, first: 0, y: head },
+                    VectorProducts(Operands { structure, values: &values, x: &x, first: 0, y: head }),
                 );
                 crate::lanes::levels::run(
                     level,
-                    VectorProducts { structure, values: &values, x: &x, first: 3, y: tail },
+                    VectorProducts(Operands { structure, values: &values, x: &x, first: 3, y: tail }),
                 );
-                let all = VectorProducts { structure, values: &values32, x: &x, first: 0, y: &mut y32 };
+                let all = VectorProducts(Operands { structure, values: &values32, x: &x, first: 0, y: &mut y32 });
                 crate::lanes::levels::run(level, all);
                 for (i, row) in dense.iter().enumerate() {
                     for k in 0..VECTORS {
@@ -295,13 +302,17 @@ mod tests {
         for level in crate::lanes::levels::available("spmv") {
             let (mut y, mut y32) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
             let (head, tail) = y.split_at_mut(9);
-            let dot =
-                crate::lanes::levels::run(level, Products { structure, values: &values, x: &x, first: 0, y: head })
-                    + crate::lanes::levels::run(
-                        level,
-                        Products { structure, values: &values, x: &x, first: 3, y: tail },
-                    );
-            crate::lanes::levels::run(level, Products { structure, values: &values32, x: &x, first: 0, y: &mut y32 });
+            let dot = crate::lanes::levels::run(
+                level,
+                Products(Operands { structure, values: &values, x: &x, first: 0, y: head }),
+            ) + crate::lanes::levels::run(
+                level,
+                Products(Operands { structure, values: &values, x: &x, first: 3, y: tail }),
+            );
+            crate::lanes::levels::run(
+                level,
+                Products(Operands { structure, values: &values32, x: &x, first: 0, y: &mut y32 }),
+            );
             for (i, ((&got, &w), &scale)) in y.iter().zip(&want).zip(&scale).enumerate() {
                 assert!((got - w).abs() <= 1e-14 * scale, "{level:?}: y[{i}] = {got}, dense {w}");
                 // (each value rounded to f32 by at most 2⁻²⁴ of itself)
