@@ -916,20 +916,8 @@ mod tests {
     fn the_coarse_level_cuts_the_iterations_of_smooth_error() {
         let (pattern, values) = soft_bar(64, 4, 1e-4);
         let n = pattern.nrows();
-        let matrix = SparseColMatRef::new(pattern.as_ref(), &values);
         let b: Vec<f64> = (0..n).map(|i| 1.0 + (i as f64 * 0.01).sin()).collect();
-        let iterations = |two_level: bool| {
-            let mut cg = ConjugateGradient::new(1e-8, 5000);
-            cg.analyze(pattern.as_ref()).unwrap();
-            if !two_level {
-                cg.coarse = None;
-            }
-            cg.factor(matrix).unwrap();
-            let mut x = vec![0.0; n];
-            let stats = cg.solve(matrix, &b, &mut x).unwrap();
-            assert!(residual(&pattern, &values, &b, &x) <= 1e-8);
-            stats.iterations
-        };
+        let iterations = |two_level| iterations_from_zero(&pattern, &values, &b, 1e-8, two_level);
         let (jacobi, two_level) = (iterations(false), iterations(true));
         println!("soft bar: block Jacobi {jacobi}, two-level {two_level} iterations");
         assert!(two_level * 2 < jacobi, "two-level {two_level} against block Jacobi {jacobi} iterations");
@@ -950,18 +938,7 @@ mod tests {
         let translation: Vec<f64> = (0..n).map(|i| [0.3, -0.2, 0.5][i % 3]).collect();
         let mut b = vec![0.0; n];
         symmetric_matvec(matrix, &translation, &mut b);
-        let iterations = |two_level: bool| {
-            let mut cg = ConjugateGradient::new(1e-6, 5000);
-            cg.analyze(pattern.as_ref()).unwrap();
-            if !two_level {
-                cg.coarse = None;
-            }
-            cg.factor(matrix).unwrap();
-            let mut x = vec![0.0; n];
-            let stats = cg.solve(matrix, &b, &mut x).unwrap();
-            assert!(residual(&pattern, &values, &b, &x) <= 1e-6);
-            stats.iterations
-        };
+        let iterations = |two_level| iterations_from_zero(&pattern, &values, &b, 1e-6, two_level);
         let (jacobi, two_level) = (iterations(false), iterations(true));
         println!("a translation of the soft bar: block Jacobi {jacobi}, two-level {two_level} iterations");
         assert!(two_level <= 1 && jacobi > 50, "two-level {two_level}, block Jacobi {jacobi} iterations");
@@ -1010,6 +987,29 @@ mod tests {
         let forgotten = solve(&mut cg, &b3);
         println!("soft bar: {first:?}, then {with_history} iterations with the history, {fresh} without, {forgotten} after a new analysis");
         assert!(with_history == 0 && fresh > 10 && forgotten == fresh, "{with_history}, {fresh}, {forgotten}");
+    }
+
+    /// The iterations a new solver (with its coarse level or without) takes
+    /// from a zero guess to the relative residual `tolerance`, which an
+    /// independent check confirms.
+    fn iterations_from_zero(
+        pattern: &SymbolicSparseColMat<usize>,
+        values: &[f64],
+        b: &[f64],
+        tolerance: f64,
+        two_level: bool,
+    ) -> usize {
+        let matrix = SparseColMatRef::new(pattern.as_ref(), values);
+        let mut cg = ConjugateGradient::new(tolerance, 5000);
+        cg.analyze(pattern.as_ref()).unwrap();
+        if !two_level {
+            cg.coarse = None;
+        }
+        cg.factor(matrix).unwrap();
+        let mut x = vec![0.0; b.len()];
+        let stats = cg.solve(matrix, b, &mut x).unwrap();
+        assert!(residual(pattern, values, b, &x) <= tolerance);
+        stats.iterations
     }
 
     /// `|b - A x| / |b|` with the `f64` values, computed apart from the solver.
