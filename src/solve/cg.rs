@@ -51,10 +51,9 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 /// residual of 1e-6 (5.5 at 1e-8): its motion is nearly rigid. With its
 /// base clamped, sagging and swaying, the body deforms and the step takes
 /// 86 iterations at 1e-6 and 140 at 1e-8 from that start, 50 and 92 from
-/// the span of the last 8 corrections (`history.rs`); more
-/// aggregates barely help (about 250 of them: 67 iterations without the
-/// history, at a dense coarse factor that costs more than the iterations
-/// it saves).
+/// the span of the last 8 corrections (`history.rs`); more aggregates
+/// barely help (about 250 of them: 67 iterations without the history, at
+/// a dense coarse factor that costs more than the iterations it saves).
 pub struct ConjugateGradient {
     /// Relative residual `|b - A x| / |b|` to reach.
     pub tolerance: f64,
@@ -107,12 +106,12 @@ pub struct ConjugateGradient {
 /// steps of bunny_100k as `cleave bench` steps it (AMD EPYC, 2 cores), 8
 /// took the body with its base clamped from 85 to 50 iterations per step
 /// at 1e-6 and from 139 to 92 at 1e-8 (55 and 97 when a young history was
-/// judged by [`super::history::WORTH`] too), falling onto a
-/// plane from 1.6 to 1.0 and from 5.5 to 2.9, for one product of 8
-/// vectors (1.2 to 1.5 ms there, against 2.8 to 3.0 ms for 8 products of
-/// one) and two passes, about 2.2 ms, per projecting step. (A first version measured 4: 55 and 108 clamped; 12:
-/// 49 and 96; and whole solutions kept instead of corrections, 8: 57 and
-/// 111.)
+/// judged by [`super::history::WORTH`] too), falling onto a plane from 1.6
+/// to 1.0 and from 5.5 to 2.9, for one product of 8 vectors (1.2 to 1.5
+/// ms there, against 2.8 to 3.0 ms for 8 products of one) and two passes,
+/// about 2.2 ms, per projecting step. (A first version measured 4: 55 and
+/// 108 clamped; 12: 49 and 96; and whole solutions kept instead of
+/// corrections, 8: 57 and 111.)
 const KEPT_CORRECTIONS: usize = 8;
 
 /// The 3x3 block structure of a matrix in the layout of
@@ -412,7 +411,7 @@ impl ConjugateGradient {
     }
 
     /// `x` and its residual `self.r` moved to the best start in the span of
-    /// the last solutions ([`SolutionHistory::project`]), with products on
+    /// the last corrections ([`SolutionHistory::project`]), with products on
     /// the `f64` values when `exact`, else on the rounded ones; returns
     /// whether they moved.
     fn project_on_history(&mut self, exact: bool, x: &mut [f64]) -> bool {
