@@ -1,9 +1,11 @@
 //! Preconditioned conjugate gradients, warm-started from the caller's
 //! guess moved to the best start in the span of the last solves'
 //! corrections (`history.rs`) and corrected by the coarse solution of its
-//! residual, with a two-level preconditioner: 3x3 block Jacobi plus the
-//! coarse correction of the rigid motions of node aggregates
-//! (`coarse.rs`), `z = D⁻¹ r + P A_c⁻¹ Pᵀ r`.
+//! residual, with an additive multilevel preconditioner: 3x3 block Jacobi
+//! plus the coarse correction of the rigid motions of node aggregates
+//! (`coarse.rs`), `z = D⁻¹ r + P B Pᵀ r`, `B ≈ (Pᵀ A P)⁻¹` block Jacobi on
+//! the aggregates' motions plus the exact solve on those of aggregates of
+//! aggregates (`aggregate_cycle.rs`).
 //!
 //! The matrix stores both triangles and is symmetric, so `y = A x` is
 //! computed row by row as `y_i = (column i) · x`, in parallel without
@@ -31,7 +33,7 @@ use cleave_kernels::spmv::{block_products, block_products_of_vectors, BlockColum
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
-use super::coarse::{aggregate_limit, CoarseSpace};
+use super::coarse::{aggregate_limit, CoarseSpace, Correction};
 use super::history::SolutionHistory;
 use super::ordering::Renumbering;
 use super::{Cholesky, LinearSolver, SolveError, SolveStats};
@@ -49,11 +51,12 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 /// level and its deflated start take the body falling onto a plane from
 /// 86 iterations per step with block Jacobi alone to 1.6 at a relative
 /// residual of 1e-6 (5.5 at 1e-8): its motion is nearly rigid. With its
-/// base clamped, sagging and swaying, the body deforms and the step takes
-/// 86 iterations at 1e-6 and 140 at 1e-8 from that start, 50 and 92 from
-/// the span of the last 8 corrections (`history.rs`); more aggregates
-/// barely help (about 250 of them: 67 iterations without the history, at
-/// a dense coarse factor that costs more than the iterations it saves).
+/// base clamped, sagging and swaying, the body deforms: with the 32
+/// aggregates of aggregates alone (one dense level) the step took 86
+/// iterations at 1e-6 and 140 at 1e-8 from that start, 58 and 107 from
+/// the span of the last 8 corrections (`history.rs`); with the 687
+/// aggregates' block Jacobi added, 43 and 80 (2 cores, AMD EPYC: solve 53
+/// against 62 ms at 1e-6, 84 against 100 ms at 1e-8).
 pub struct ConjugateGradient {
     /// Relative residual `|b - A x| / |b|` to reach.
     pub tolerance: f64,
@@ -69,10 +72,18 @@ pub struct ConjugateGradient {
     /// Inverted diagonal blocks of the current matrix, each symmetric and
     /// stored as its upper triangle `[m00, m01, m02, m11, m12, m22]`.
     inverse_blocks: Vec<[f64; 6]>,
-    /// The matrix values in the solver's layout, and rounded to `f32` for
-    /// the products of the iteration (see [`ConjugateGradient::solve`]).
-    values: Vec<f64>,
+    /// The caller's block structure, on which the `f64` residual is taken
+    /// from the caller's values (see [`ConjugateGradient::solve`]).
+    given: BlockStructure,
+    /// The matrix values in the solver's layout rounded to `f32`, for the
+    /// products of the iteration, and as they are, carried only when the
+    /// iteration must read them (`carried`).
     values32: Vec<f32>,
+    values: Vec<f64>,
+    carried: bool,
+    /// A vector in the caller's numbering, and its product.
+    x_given: Vec<f64>,
+    r_given: Vec<f64>,
     /// Whether every rounded value is finite (else the iteration reads the
     /// `f64` values).
     rounded: bool,
@@ -241,8 +252,12 @@ impl ConjugateGradient {
             numbering: Renumbering::default(),
             diagonal_blocks: Vec::new(),
             inverse_blocks: Vec::new(),
-            values: Vec::new(),
+            given: BlockStructure::default(),
             values32: Vec::new(),
+            values: Vec::new(),
+            carried: false,
+            x_given: Vec::new(),
+            r_given: Vec::new(),
             rounded: false,
             partial: Vec::new(),
             partial_pairs: Vec::new(),
@@ -280,14 +295,32 @@ impl ConjugateGradient {
         partial.iter().sum()
     }
 
-    /// `r = b - A x` with the `f64` values; returns `|r|`.
-    fn exact_residual(&mut self, b: &[f64], x: &[f64]) -> f64 {
-        let (mut r, mut partial) = (std::mem::take(&mut self.r), std::mem::take(&mut self.partial));
-        self.matvec(&self.values, x, &mut r, &mut partial);
-        self.partial = partial;
-        r.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
-        self.r = r;
+    /// `self.r = b - A x` with the caller's `f64` values `given` and
+    /// right-hand side `b` (in the caller's layout and numbering), for `x`
+    /// in the solver's numbering; returns `|r|`. (The product runs on the
+    /// caller's structure: the solver's copy of the values is `f32`.)
+    fn exact_residual(&mut self, given: &[f64], b: &[f64], x: &[f64]) -> f64 {
+        let (mut x_given, mut r_given) = (std::mem::take(&mut self.x_given), std::mem::take(&mut self.r_given));
+        self.numbering.to_old(as_blocks(x), as_blocks_mut(&mut x_given));
+        let structure = self.given.columns();
+        r_given.par_chunks_mut(3 * CHUNK_BLOCKS).zip(b.par_chunks(3 * CHUNK_BLOCKS)).enumerate().for_each(
+            |(c, (r, b))| {
+                block_products(structure, given, &x_given, c * CHUNK_BLOCKS, r);
+                r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+            },
+        );
+        self.numbering.to_new(as_blocks(&r_given), as_blocks_mut(&mut self.r));
+        (self.x_given, self.r_given) = (x_given, r_given);
         dot(&self.r, &self.r).sqrt()
+    }
+
+    /// The `f64` values in the solver's layout, carried from the caller's
+    /// `given` ones the first time an iteration must read them.
+    fn carry_exact(&mut self, given: &[f64]) {
+        if !self.carried {
+            self.numbering.carry_exact(given, &mut self.values);
+            self.carried = true;
+        }
     }
 
     /// [`ConjugateGradient::iterate`] on the `f64` values (`exact`) or on
@@ -366,8 +399,15 @@ impl ConjugateGradient {
         Ok(budget)
     }
 
-    /// The solve of [`LinearSolver::solve`] in the solver's numbering.
-    fn solve_own(&mut self, b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError> {
+    /// The solve of [`LinearSolver::solve`] in the solver's numbering (`b`
+    /// and `x`), the caller's values and right-hand side `given` and
+    /// `b_given` for the exact residual.
+    fn solve_own(
+        &mut self,
+        (given, b_given): (&[f64], &[f64]),
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<SolveStats, SolveError> {
         let norm_b = dot(b, b).sqrt();
         if norm_b == 0.0 {
             x.fill(0.0);
@@ -375,8 +415,11 @@ impl ConjugateGradient {
         }
         let goal = self.tolerance * norm_b;
         let (mut iterations, mut exact) = (0, !self.rounded);
-        let mut norm_r = self.exact_residual(b, x);
+        let mut norm_r = self.exact_residual(given, b_given, x);
         self.history.begin(x);
+        if exact {
+            self.carry_exact(given);
+        }
         if norm_r > goal && self.history.wanted() && self.project_on_history(exact, x) {
             // (the projection's products read the values the iteration
             // reads: its residual counts once the exact one confirms it)
@@ -384,7 +427,7 @@ impl ConjugateGradient {
             norm_r = dot(&self.r, &self.r).sqrt();
             self.history.judge(norm_r / before);
             if norm_r <= goal {
-                norm_r = self.exact_residual(b, x);
+                norm_r = self.exact_residual(given, b_given, x);
             }
         }
         loop {
@@ -405,8 +448,11 @@ impl ConjugateGradient {
             }
             iterations += self.iterate_on(exact, goal, budget, x)?;
             let before = norm_r;
-            norm_r = self.exact_residual(b, x);
+            norm_r = self.exact_residual(given, b_given, x);
             exact |= norm_r > 0.5 * before;
+            if exact {
+                self.carry_exact(given);
+            }
         }
     }
 
@@ -429,21 +475,23 @@ impl ConjugateGradient {
         moved
     }
 
-    /// The coarse level's start: `x += w` and `r -= A w` for `w = P A_c⁻¹
-    /// Pᵀ r`, the coarse solution of the residual, after which the
-    /// residual has no component in the coarse space (a deflated start,
-    /// as in Saad, Yeung, Erhel and Guyomarc'h 2000). The error the
-    /// preconditioner reduces slowest, motions of whole regions, is then
-    /// gone before the first iteration: a step that moves the body
-    /// rigidly, as a free fall does, starts within a few digits of its
-    /// answer (bunny_100k falling: 1 iteration per step at 1e-6 where the
-    /// start `x` alone took 21). `A w` is a product on the `values` the
-    /// round iterates on, so `r` stays the residual of that matrix.
+    /// The coarse level's start: `x += w` and `r -= A w` for `w = P T
+    /// A₂⁻¹ Tᵀ Pᵀ r`, the exact solution of the residual's equation on the
+    /// rigid motions of the aggregates of aggregates (on all aggregates
+    /// when their system is solved exactly), after which the residual has
+    /// no component there (a deflated start, as in Saad, Yeung, Erhel and
+    /// Guyomarc'h 2000). The error the preconditioner reduces slowest,
+    /// motions of whole regions, is then gone before the first iteration:
+    /// a step that moves the body rigidly, as a free fall does, starts
+    /// within a few digits of its answer (bunny_100k falling: 1.7
+    /// iterations per step at 1e-6 where the start `x` alone took 21). `A
+    /// w` is a product on the `values` the round iterates on, so `r` stays
+    /// the residual of that matrix.
     fn deflate<T: Value>(&mut self, values: &[T], x: &mut [f64]) {
         let Some(coarse) = self.coarse.as_mut() else { return };
         let mut w = std::mem::take(&mut self.z);
         w.fill(0.0);
-        coarse.correct(&self.r, &mut w, CHUNK_BLOCKS);
+        coarse.correct(&self.r, &mut w, Correction::Groups);
         let (mut aw, mut partial) = (std::mem::take(&mut self.ap), std::mem::take(&mut self.partial));
         self.matvec(values, &w, &mut aw, &mut partial);
         (x.par_iter_mut().zip(&w)).zip(self.r.par_iter_mut().zip(&aw)).for_each(|((x, w), (r, aw))| {
@@ -475,7 +523,7 @@ impl ConjugateGradient {
             z.copy_from_slice(&symmetric_times(m, r));
         });
         if let Some(coarse) = self.coarse.as_mut() {
-            coarse.correct(r, z, CHUNK_BLOCKS);
+            coarse.correct(r, z, Correction::Whole);
         }
         Ok(())
     }
@@ -534,7 +582,7 @@ fn update(
                 }
             }
             if let Some(coarse) = coarse {
-                coarse.restrict(c * CHUNK_BLOCKS, r, restricted);
+                coarse.restrict(c, r, restricted);
             }
             *part = [rr, rz];
         });
@@ -599,7 +647,7 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
         partial
             .par_iter_mut()
             .zip(a.par_chunks(CHUNK).zip(b.par_chunks(CHUNK)))
-            .for_each(|(s, (x, y))| *s = x.iter().zip(y).map(|(p, q)| p * q).sum());
+            .for_each(|(s, (x, y))| *s = lane_dot(x, y));
         partial.iter().sum()
     };
     if chunks <= STACK_CHUNKS {
@@ -607,6 +655,25 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     } else {
         sum_into(&mut vec![0.0; chunks])
     }
+}
+
+/// Lanes of [`lane_dot`]'s independent sums.
+const LANES: usize = 8;
+
+/// `Σ x_i y_i` of one chunk: [`LANES`] running sums, lane `l` taking every
+/// entry `i ≡ l (mod LANES)`, then the lanes and the tail in order. (One
+/// running sum waits out an addition's latency per entry; independent
+/// lanes vectorise and keep up with memory.)
+fn lane_dot(x: &[f64], y: &[f64]) -> f64 {
+    let mut lanes = [0.0; LANES];
+    let (xs, ys) = (x.chunks_exact(LANES), y.chunks_exact(LANES));
+    let tail: f64 = xs.remainder().iter().zip(ys.remainder()).map(|(p, q)| p * q).sum();
+    for (xs, ys) in xs.zip(ys) {
+        for l in 0..LANES {
+            lanes[l] += xs[l] * ys[l];
+        }
+    }
+    lanes.iter().sum::<f64>() + tail
 }
 
 /// A vector of 3-blocks as its blocks.
@@ -659,15 +726,18 @@ impl LinearSolver for ConjugateGradient {
         // solver renewed by a cut writes into pages it already has)
         self.numbering.renew(blocks);
         self.history.resize(n);
-        let blocks = self.numbering.blocks();
-        // the diagonal block's nine slots from its position among the block
-        // rows (one search per block; the first block without one is named
-        // in the caller's numbering)
+        self.given.clone_from(blocks);
+        // the diagonal block's nine slots (in the caller's layout, where the
+        // f64 values are) from its position among the block rows, for every
+        // block of the solver's numbering (one search per block; the first
+        // block without one is named in the caller's numbering)
+        let (given, order) = (&self.given, self.numbering.order());
         let slot = |j: usize| -> Option<[usize; 9]> {
-            let rows = blocks.column_rows(j);
-            let p = rows.binary_search(&(j as u32)).ok()?;
+            let old = order[j] as usize;
+            let rows = given.column_rows(old);
+            let p = rows.binary_search(&(old as u32)).ok()?;
             let stride = 3 * rows.len();
-            Some(std::array::from_fn(|k| blocks.start[j] + (k % 3) * stride + 3 * p + k / 3))
+            Some(std::array::from_fn(|k| given.start[old] + (k % 3) * stride + 3 * p + k / 3))
         };
         if let Some(j) = (0..n / 3).into_par_iter().find_first(|&j| slot(j).is_none()) {
             let block = self.numbering.order()[j];
@@ -675,21 +745,24 @@ impl LinearSolver for ConjugateGradient {
         }
         self.diagonal_blocks.clear();
         self.diagonal_blocks.par_extend((0..n / 3).into_par_iter().map(|j| slot(j).expect("checked above")));
+        let blocks = self.numbering.blocks();
         self.inverse_blocks.resize(n / 3, [0.0; 6]);
         // (the rotated rest-state factor replaces block Jacobi and its
         // coarse level, and takes the new reference before a solve)
         let limit = aggregate_limit(pattern.row_idx().len());
         let old = self.coarse.take().unwrap_or_default();
-        self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, old));
+        self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, CHUNK_BLOCKS, old));
         if let Some(rest) = self.rest.as_mut() {
             rest.ready = false;
         }
         // (every entry is written before it is read in a solve)
         self.values.resize(pattern.row_idx().len(), 0.0);
         self.values32.resize(pattern.row_idx().len(), 0.0);
-        for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
+        self.carried = false;
+        for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.x_given] {
             v.resize(n, 0.0);
         }
+        self.r_given.resize(n, 0.0);
         let chunks = (n / 3).div_ceil(CHUNK_BLOCKS);
         self.partial.resize(chunks, 0.0);
         self.partial_pairs.resize(chunks, [0.0; 2]);
@@ -701,20 +774,22 @@ impl LinearSolver for ConjugateGradient {
         if val.len() != self.values.len() {
             return Err(SolveError::NotReady);
         }
-        // one parallel pass carries the values into the solver's layout,
-        // rounds them to f32 and checks both: a finite value beyond f32's
-        // range rounds to infinity, and then the iteration takes the f64
-        // values throughout
-        let (finite, rounded) = self.numbering.carry_values(val, &mut self.values, &mut self.values32);
+        // one parallel pass carries the values into the solver's layout
+        // rounded to f32 and checks them: a finite value beyond f32's range
+        // rounds to infinity, and then the iteration takes the f64 values
+        // throughout, carried as well
+        let (finite, rounded) = self.numbering.round_values(val, &mut self.values32);
         if !finite {
             return Err(SolveError::NonFinite);
         }
-        self.rounded = rounded;
-        let values = &self.values;
+        (self.rounded, self.carried) = (rounded, false);
         self.inverse_blocks.par_iter_mut().zip(&self.diagonal_blocks).for_each(|(inv, slots)| {
-            let m = invert3(slots.map(|s| values[s]));
+            let m = invert3(slots.map(|s| val[s]));
             *inv = [m[0], m[1], m[2], m[4], m[5], m[8]];
         });
+        if !rounded {
+            self.carry_exact(val);
+        }
         if let Some(coarse) = self.coarse.as_mut() {
             // (from the values the iteration reads: the preconditioner
             // need not be exact, and they are half the bytes)
@@ -725,7 +800,7 @@ impl LinearSolver for ConjugateGradient {
         }
         // one coarse vector per chunk of the update pass (one value per
         // chunk without a coarse level)
-        let m = self.coarse.as_ref().map_or(1, |c| c.restricted_len().max(1));
+        let m = self.coarse.as_ref().map_or(1, |c| c.window_len().max(1));
         self.partial_restrictions.resize(self.partial_pairs.len() * m, 0.0);
         Ok(())
     }
@@ -756,7 +831,7 @@ impl LinearSolver for ConjugateGradient {
         let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
         self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
         self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
-        let stats = self.solve_own(&b_own, &mut x_own);
+        let stats = self.solve_own((matrix.parts().1, b), &b_own, &mut x_own);
         self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
         (self.b, self.x) = (b_own, x_own);
         stats

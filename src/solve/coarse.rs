@@ -1,18 +1,23 @@
-//! The coarse level of a two-level preconditioner: the rigid motions of
+//! The coarse level of the preconditioner: the rigid motions of
 //! aggregates of blocks.
 //!
-//! Blocks (nodes) are grouped into aggregates by greedy aggregation of the
-//! matrix graph, repeated on the graph of the aggregates until at most a
-//! given number remain. The prolongation `P` maps the rigid motions of
-//! each aggregate to its blocks: `P_ia = [I  S_i]` for block `i` of
-//! aggregate `a`, `S_i = -[d_i]×` the infinitesimal rotations about the
-//! aggregate's centroid (`d_i` the block's position from it, so that
-//! `S_i ω = ω × d_i`), or `P_ia = I` (translations alone) when the blocks
-//! have no positions. The correction added to the smoother's `z` is
-//! `P A_c⁻¹ Pᵀ r` with `A_c = Pᵀ A P`. It removes at once the error that
-//! block Jacobi reduces slowly: motions of whole regions, which only the
-//! mass resists while block Jacobi divides by the much larger stiffness
-//! diagonal.
+//! Blocks (nodes) are grouped into aggregates by one round of greedy
+//! aggregation of the matrix graph (on bunny_100k: 17.6k blocks into 687
+//! aggregates). The prolongation `P` maps the rigid motions of each
+//! aggregate to its blocks: `P_ia = [I  S_i]` for block `i` of aggregate
+//! `a`, `S_i = -[d_i]×` the infinitesimal rotations about the aggregate's
+//! centroid (`d_i` the block's position from it, so that `S_i ω = ω ×
+//! d_i`), or `P_ia = I` (translations alone) when the blocks have no
+//! positions. The correction added to the smoother's `z` is `P B Pᵀ r`,
+//! `B ≈ A₁⁻¹` the cycle of `aggregate_cycle.rs` on `A₁ = Pᵀ A P` (exactly
+//! `A₁⁻¹` when there are few aggregates): the exact solve on the rigid
+//! motions of aggregates of aggregates plus block Jacobi on the
+//! aggregates'. It removes the error that block Jacobi reduces slowly:
+//! motions of whole regions, which only the mass resists while block
+//! Jacobi divides by the much larger stiffness diagonal. (The coarse level
+//! was first the aggregates of aggregates alone, 32 on bunny_100k, with a
+//! dense factor: the clamped bunny's steps took 107 iterations at 1e-8
+//! with it, 79 with the aggregates' block Jacobi added.)
 //!
 //! Aggregates follow the matrix graph, so no aggregate spans two pieces of
 //! a cut body. Every sum runs in a fixed order, so the correction has the
@@ -20,20 +25,19 @@
 
 use cleave_kernels::spmv::Value;
 use cleave_kernels::vec3::cross;
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt;
-use faer::{MatMut, MatRef, Par};
 use rayon::prelude::*;
 
+use super::aggregate_cycle::{AggregateCycle, AggregateMatrix, ROTATION_FLOOR};
 use super::{BlockStructure, SolveError};
 
-/// The most aggregates the coarse level takes for a matrix storing
-/// `stored` values: `m = ∛stored / 2`. Its dense factor of six modes per
-/// aggregate then costs `(6m)³ / 3 = 9 · stored` flops once per step (a
-/// few passes over the matrix) and its triangular solves `36 m²` flops per
-/// iteration, a small fraction of the product's `2 · stored`. (On
-/// bunny_100k, 2.3M values, the aggregation rounds give about 1.6k, then
-/// 32 aggregates; see [`super::ConjugateGradient`] for what they save.)
+/// The most aggregates whose system the coarse level solves exactly, and
+/// the most aggregates of aggregates the cycle solves exactly otherwise,
+/// for a matrix storing `stored` values: `m = ∛stored / 2`. Its dense
+/// factor of six modes per aggregate then costs `(6m)³ / 3 = 9 · stored`
+/// flops once per step (a few passes over the matrix) and its triangular
+/// solves `36 m²` flops per iteration, a small fraction of the product's
+/// `2 · stored`. (On bunny_100k, 2.3M values, the second aggregation round
+/// gives 32 aggregates of aggregates.)
 pub(super) fn aggregate_limit(stored: usize) -> usize {
     ((stored as f64).cbrt() / 2.0) as usize
 }
@@ -44,7 +48,10 @@ const FREE: u32 = u32::MAX;
 /// Block columns below which the run sums are formed without splitting.
 const RUN_TASK_COLUMNS: usize = 512;
 
-/// Aggregates of the blocks and the factor of their coarse matrix.
+/// Block columns of `A₁` below which they are assembled without splitting.
+const AGGREGATE_TASK_COLUMNS: usize = 16;
+
+/// Aggregates of the blocks and the solve of their system.
 #[derive(Default)]
 pub(super) struct CoarseSpace {
     /// Aggregate of every block.
@@ -58,54 +65,66 @@ pub(super) struct CoarseSpace {
     members: Vec<u32>,
     /// The runs of every block column: its block rows of one aggregate
     /// each, column `j`'s at `run_ptr[j]..run_ptr[j + 1]`, run `k` those in
-    /// aggregate `run_aggregate[k]`, in the order the rows first meet them
-    /// (on bunny_100k's 17.6k columns 32k runs; runs of consecutive rows
-    /// made 80k, and the coarse factor, a step's, took about 1 ms more).
+    /// aggregate `run_aggregate[k]`, in the order the rows first meet them,
+    /// and the block of `A₁` it adds to, `run_slot[k]`.
     run_ptr: Vec<u32>,
     run_aggregate: Vec<u32>,
+    run_slot: Vec<u32>,
     /// The sums of the blocks `A_ij` of every run, `Σ A_ij` and, with
     /// positions, `Σ S_iᵀ A_ij` (`[3 c + r]` and `[9 + 3 c + r]` for entry
     /// `(r, c)`).
     run_sums: Vec<[f64; 18]>,
-    /// `A_c` (column-major, `k m x k m` for `m` aggregates of `k` modes),
-    /// overwritten by its lower Cholesky factor.
-    factor: Vec<f64>,
+    /// `A₁ = Pᵀ A P` on the graph of the aggregates.
+    system: AggregateMatrix,
+    /// Its solve.
+    cycle: AggregateCycle,
+    /// Every aggregate's centroid (m).
+    centroids: Vec<[f64; 3]>,
+    /// Blocks per chunk of a restriction, the first aggregate of each
+    /// chunk's blocks, and the most aggregates a chunk's blocks reach from
+    /// it: a chunk restricts into a window of aggregates, not all of them
+    /// (they are founded in block order, so a chunk's aggregates lie close
+    /// together: on bunny_100k 1024 blocks reach windows of at most about
+    /// 150 of 898 aggregates).
+    chunk_blocks: usize,
+    window_first: Vec<u32>,
+    window: usize,
     /// `Pᵀ r` per chunk of blocks of [`CoarseSpace::correct`], then summed
     /// in order.
     partial: Vec<f64>,
-    /// `Pᵀ r` and `A_c⁻¹ Pᵀ r`.
+    /// `Pᵀ r` and `B Pᵀ r`.
     restricted: Vec<f64>,
     correction: Vec<f64>,
-    stack: Option<MemBuffer>,
 }
 
 impl CoarseSpace {
-    /// Aggregates of the blocks of `blocks`, coarsened until at most
-    /// `max_aggregates` remain (or a round merges nothing).
+    /// Aggregates of the blocks of `blocks`, their system solved exactly up
+    /// to `max_aggregates` aggregates, else by a cycle whose aggregates of
+    /// aggregates are coarsened to at most that many (or until a round
+    /// merges nothing).
     #[cfg(test)]
-    pub fn new(blocks: &BlockStructure, max_aggregates: usize) -> Self {
-        Self::renew(blocks, max_aggregates, Self::default())
+    pub fn new(blocks: &BlockStructure, max_aggregates: usize, chunk_blocks: usize) -> Self {
+        Self::renew(blocks, max_aggregates, chunk_blocks, Self::default())
     }
 
-    /// Aggregates of the blocks of `blocks`, coarsened until at most
-    /// `max_aggregates` remain (or a round merges nothing), in the arrays
-    /// of `old` (the space of the pattern before a topology change, or an
-    /// empty one): a space per cut reuses its predecessor's memory instead
-    /// of faulting in fresh pages for its runs.
-    pub fn renew(blocks: &BlockStructure, max_aggregates: usize, old: Self) -> Self {
+    /// [`CoarseSpace::new`], restricting in chunks of `chunk_blocks`
+    /// blocks, in the arrays of `old` (the space of the
+    /// pattern before a topology change, or an empty one): a space per cut
+    /// reuses its predecessor's memory instead of faulting in fresh pages
+    /// for its runs.
+    pub fn renew(blocks: &BlockStructure, max_aggregates: usize, chunk_blocks: usize, old: Self) -> Self {
         let n = blocks.ptr.len() - 1;
-        let mut of: Vec<u32> = (0..n as u32).collect();
-        let (mut count, mut graph) = (n, None::<(Vec<u32>, Vec<u32>)>);
-        while count > max_aggregates.max(1) {
-            let (ptr, adj) = graph.as_ref().map_or((&blocks.ptr[..], &blocks.rows[..]), |(p, a)| (&p[..], &a[..]));
-            let (round, merged) = aggregate(ptr, adj);
-            if merged == count {
-                break;
+        let limit = max_aggregates.max(1);
+        // one round (none for a system the limit solves whole)
+        let round = (n > limit).then(|| aggregate(&blocks.ptr, &blocks.rows)).filter(|&(_, merged)| merged < n);
+        let (of, count, graph) = match round {
+            Some((of, count)) => {
+                let graph = quotient(&blocks.ptr, &blocks.rows, &of, count);
+                (of, count, graph)
             }
-            of.par_iter_mut().for_each(|a| *a = round[*a as usize]);
-            graph = Some(quotient(ptr, adj, &round, merged));
-            count = merged;
-        }
+            None => ((0..n as u32).collect(), n, (blocks.ptr.clone(), blocks.rows.clone())),
+        };
+        let grouping = (count > limit).then(|| coarsen(&graph, count, limit)).flatten();
         let (ptr, members) = group(&of, count);
         let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
         // the aggregates of a column's rows, each once, as the rows meet them
@@ -118,39 +137,64 @@ impl CoarseSpace {
                 }
             }
         };
+        let (graph_ptr, graph_rows) = graph;
+        let slot_of = |a: u32, b: u32| -> u32 {
+            let rows = &graph_rows[graph_ptr[b as usize] as usize..graph_ptr[b as usize + 1] as usize];
+            let p = rows.binary_search(&a).expect("aggregates of neighbouring blocks are neighbours");
+            graph_ptr[b as usize] + p as u32
+        };
         // every task of columns lists its columns' runs (in parallel, in
         // order), then the lists are laid end to end
         let tasks: Vec<std::ops::Range<usize>> =
             (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
-        let listed: Vec<(Vec<u32>, Vec<u32>)> = tasks
+        let listed: Vec<(Vec<u32>, Vec<u32>, Vec<u32>)> = tasks
             .into_par_iter()
             .map(|columns| {
-                let (mut seen, mut counts, mut aggregates) = (Vec::new(), Vec::new(), Vec::new());
+                let (mut seen, mut counts, mut aggregates, mut slots) =
+                    (Vec::new(), Vec::new(), Vec::new(), Vec::new());
                 for j in columns {
                     aggregates_of(j, &mut seen);
                     counts.push(seen.len() as u32);
                     aggregates.extend_from_slice(&seen);
+                    slots.extend(seen.iter().map(|&a| slot_of(a, of[j])));
                 }
-                (counts, aggregates)
+                (counts, aggregates, slots)
             })
             .collect();
         let mut run_ptr = Vec::with_capacity(n + 1);
         run_ptr.push(0u32);
-        for count in listed.iter().flat_map(|(counts, _)| counts) {
+        for count in listed.iter().flat_map(|(counts, _, _)| counts) {
             run_ptr.push(run_ptr[run_ptr.len() - 1] + count);
         }
-        let (mut run_aggregate, mut run_sums) = (old.run_aggregate, old.run_sums);
+        let (mut run_aggregate, mut run_slot, mut run_sums) = (old.run_aggregate, old.run_slot, old.run_sums);
         run_aggregate.clear();
-        listed.iter().for_each(|(_, aggregates)| run_aggregate.extend_from_slice(aggregates));
+        run_slot.clear();
+        listed.iter().for_each(|(_, aggregates, slots)| {
+            run_aggregate.extend_from_slice(aggregates);
+            run_slot.extend_from_slice(slots);
+        });
         run_sums.resize(run_aggregate.len(), [0.0; 18]);
+        let mut system = old.system;
+        (system.ptr, system.rows) = (graph_ptr, graph_rows);
+        let chunk_blocks = chunk_blocks.max(1);
+        let spans: Vec<(u32, u32)> = of
+            .chunks(chunk_blocks)
+            .map(|c| c.iter().fold((u32::MAX, 0), |(lo, hi), &a| (lo.min(a), hi.max(a))))
+            .collect();
+        let window = spans.iter().map(|&(lo, hi)| (hi - lo) as usize + 1).max().unwrap_or(0);
         CoarseSpace {
+            chunk_blocks,
+            window_first: spans.iter().map(|&(lo, _)| lo).collect(),
+            window,
             of,
             ptr,
             members,
             run_ptr,
             run_aggregate,
+            run_slot,
             run_sums,
-            factor: old.factor,
+            system,
+            cycle: AggregateCycle::renew(count, grouping, old.cycle),
             partial: old.partial,
             restricted: old.restricted,
             correction: old.correction,
@@ -181,6 +225,7 @@ impl CoarseSpace {
             return;
         }
         self.offsets.resize(positions.len(), [0.0; 3]);
+        self.centroids.resize(self.aggregates(), [0.0; 3]);
         let (ptr, members) = (&self.ptr, &self.members);
         for a in 0..ptr.len() - 1 {
             let blocks = &members[ptr[a] as usize..ptr[a + 1] as usize];
@@ -189,86 +234,98 @@ impl CoarseSpace {
                 (0..3).for_each(|d| c[d] += positions[i as usize][d]);
             }
             let n = blocks.len() as f64;
+            c = c.map(|c| c / n);
             for &i in blocks {
                 let x = positions[i as usize];
-                self.offsets[i as usize] = std::array::from_fn(|d| x[d] - c[d] / n);
+                self.offsets[i as usize] = std::array::from_fn(|d| x[d] - c[d]);
             }
+            self.centroids[a] = c;
         }
+        self.cycle.set_centroids(&self.centroids, &self.ptr);
     }
 
-    /// Assembles `A_c = Pᵀ A P` from the values on `blocks` (`f64`, or the
-    /// `f32` copy the iteration reads) and factors it.
-    /// The run sums stream through the values in their order; each coarse
-    /// column block `b` then adds, for each member `j` and each run of
-    /// aggregate `a` in its column, `[T  T S_j; U  U S_j]` to `A_c[a, b]`
-    /// (`T = Σ A_ij`, `U = Σ S_iᵀ A_ij`). Rotations of an aggregate too
-    /// small or too flat to rotate (a single node, nodes on a line) have no
-    /// stiffness: every rotation's diagonal gets `1e-12` of the largest
-    /// diagonal entry, so the factor exists and such a mode, whose `P`
-    /// column is zero, corrects nothing.
+    /// Assembles `A₁ = Pᵀ A P` from the values on `blocks` (`f64`, or the
+    /// `f32` copy the iteration reads) and readies its solve.
+    /// The run sums stream through the values in their order; each block
+    /// column `b` of `A₁` then adds, for each member `j` and each run of
+    /// aggregate `a` in its column, `[T  T S_j; U  U S_j]` to its block in
+    /// row `a` (`T = Σ A_ij`, `U = Σ S_iᵀ A_ij`). Rotations of an aggregate
+    /// too small or too flat to rotate (a single node, nodes on a line)
+    /// have no stiffness: every rotation's diagonal gets [`ROTATION_FLOOR`]
+    /// of the largest diagonal entry, so the factors exist and such a
+    /// mode, whose `P` column is zero, corrects nothing.
     pub fn factor<T: Value>(&mut self, blocks: &BlockStructure, values: &[T]) -> Result<(), SolveError> {
-        let (k, rotations) = (self.modes(), !self.offsets.is_empty());
-        let m = k * self.aggregates();
+        let k = self.modes();
+        let kk = k * k;
         let mut sums = std::mem::take(&mut self.run_sums);
         self.sum_runs(blocks, values, 0..blocks.ptr.len() - 1, &mut sums);
         self.run_sums = sums;
-        let mut dense = std::mem::take(&mut self.factor);
-        dense.resize(m * m, 0.0);
-        dense.par_chunks_mut(k * m).enumerate().for_each(|(b, cols)| {
-            cols.fill(0.0);
+        let mut system = std::mem::take(&mut self.system);
+        system.k = k;
+        system.values.resize(kk * system.rows.len(), 0.0);
+        self.add_runs(&system.ptr, k, 0..self.aggregates(), &mut system.values);
+        if k == 6 {
+            let diagonal = |b: usize| system.slot(b as u32, b).expect("every aggregate couples to itself");
+            let largest = (0..self.aggregates())
+                .flat_map(|b| (0..6).map(move |r| (b, r)))
+                .map(|(b, r)| system.values[kk * diagonal(b) + 7 * r])
+                .fold(0.0f64, f64::max);
+            for b in 0..self.aggregates() {
+                let p = kk * system.slot(b as u32, b).expect("every aggregate couples to itself");
+                (3..6).for_each(|r| system.values[p + 7 * r] += ROTATION_FLOOR * largest);
+            }
+        }
+        let result = self.cycle.factor(&system);
+        self.system = system;
+        // (named by a degree of freedom of the system: the first of the
+        // aggregate whose mode failed)
+        result.map_err(|failed| {
+            let first = self.members[self.ptr[failed.aggregate] as usize] as usize;
+            SolveError::NotPositiveDefinite { pivot: 3 * first, n: 3 * self.of.len() }
+        })
+    }
+
+    /// The block columns `columns` of `A₁` (`out` their values, `ptr` its
+    /// block column offsets) from the run sums of their members, halving
+    /// the range across threads down to a few columns.
+    fn add_runs(&self, ptr: &[u32], k: usize, columns: std::ops::Range<usize>, out: &mut [f64]) {
+        let kk = k * k;
+        if columns.len() > AGGREGATE_TASK_COLUMNS {
+            let mid = columns.start + columns.len() / 2;
+            let (left, right) = out.split_at_mut(kk * (ptr[mid] - ptr[columns.start]) as usize);
+            rayon::join(
+                || self.add_runs(ptr, k, columns.start..mid, left),
+                || self.add_runs(ptr, k, mid..columns.end, right),
+            );
+            return;
+        }
+        let rotations = k == 6;
+        out.fill(0.0);
+        let first_block = ptr[columns.start] as usize;
+        for b in columns {
             for &j in &self.members[self.ptr[b] as usize..self.ptr[b + 1] as usize] {
                 let runs = self.run_ptr[j as usize] as usize..self.run_ptr[j as usize + 1] as usize;
                 let dj = if rotations { self.offsets[j as usize] } else { [0.0; 3] };
-                for (sum, &a) in self.run_sums[runs.clone()].iter().zip(&self.run_aggregate[runs]) {
-                    let a = k * a as usize;
+                for (sum, &slot) in self.run_sums[runs.clone()].iter().zip(&self.run_slot[runs]) {
+                    let block = &mut out[kk * (slot as usize - first_block)..kk * (slot as usize - first_block + 1)];
+                    // entry (r, c) at c k + r
                     for c in 0..3 {
-                        let col = &mut cols[c * m..(c + 1) * m];
-                        (0..3).for_each(|r| col[a + r] += sum[3 * c + r]);
+                        (0..3).for_each(|r| block[c * k + r] += sum[3 * c + r]);
                         if rotations {
-                            (0..3).for_each(|r| col[a + 3 + r] += sum[9 + 3 * c + r]);
+                            (0..3).for_each(|r| block[c * k + 3 + r] += sum[9 + 3 * c + r]);
                         }
                     }
                     if rotations {
                         // column c of M S_j is M (e_c × d_j)
                         for c in 0..3 {
                             let e = cross(unit(c), dj);
-                            let col = &mut cols[(3 + c) * m..(4 + c) * m];
                             for r in 0..3 {
-                                col[a + r] += (0..3).map(|q| sum[3 * q + r] * e[q]).sum::<f64>();
-                                col[a + 3 + r] += (0..3).map(|q| sum[9 + 3 * q + r] * e[q]).sum::<f64>();
+                                block[(3 + c) * k + r] += (0..3).map(|q| sum[3 * q + r] * e[q]).sum::<f64>();
+                                block[(3 + c) * k + 3 + r] += (0..3).map(|q| sum[9 + 3 * q + r] * e[q]).sum::<f64>();
                             }
                         }
                     }
                 }
-            }
-        });
-        if rotations {
-            let largest = (0..m).map(|i| dense[i * m + i]).fold(0.0f64, f64::max);
-            for a in 0..self.aggregates() {
-                (3..6).for_each(|r| dense[(6 * a + r) * (m + 1)] += 1e-12 * largest);
-            }
-        }
-        // (scratch for six modes, whichever this factor has: positions may
-        // come after the first factor)
-        let most = 6 * self.aggregates();
-        let stack = self.stack.get_or_insert_with(|| {
-            MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(most, Par::Seq, Default::default()))
-        });
-        let result = llt::factor::cholesky_in_place(
-            MatMut::from_column_major_slice_mut(&mut dense, m, m),
-            Default::default(),
-            Par::Seq,
-            MemStack::new(stack),
-            Default::default(),
-        );
-        self.factor = dense;
-        match result {
-            Ok(_) => Ok(()),
-            // (named by a degree of freedom of the system: the first of
-            // the aggregate whose mode failed)
-            Err(llt::factor::LltError::NonPositivePivot { index }) => {
-                let first = self.members[self.ptr[index / k] as usize] as usize;
-                Err(SolveError::NotPositiveDefinite { pivot: 3 * first, n: 3 * self.of.len() })
             }
         }
     }
@@ -324,13 +381,22 @@ impl CoarseSpace {
         self.modes() * self.aggregates()
     }
 
-    /// `partial = Pᵀ r` of the blocks `first..first + r.len() / 3` (`r`
-    /// their entries), summed in block order; a run of blocks in one
-    /// aggregate is summed in registers.
-    pub fn restrict(&self, first: usize, r: &[f64], partial: &mut [f64]) {
-        let k = self.modes();
+    /// Length of the part of `Pᵀ r` that one chunk of blocks restricts
+    /// into: the modes of [`CoarseSpace::window`] aggregates.
+    pub fn window_len(&self) -> usize {
+        self.modes() * self.window
+    }
+
+    /// `partial = Pᵀ r` of the blocks of chunk `chunk` (`r` their entries),
+    /// over the window of aggregates from the chunk's first one (see
+    /// [`CoarseSpace::window`]), summed in block order; a run of blocks in
+    /// one aggregate is summed in registers.
+    pub fn restrict(&self, chunk: usize, r: &[f64], partial: &mut [f64]) {
+        let (k, first) = (self.modes(), chunk * self.chunk_blocks);
+        let base = self.window_first.get(chunk).map_or(0, |&a| a as usize);
         partial.fill(0.0);
         let mut add = |a: usize, sum: &[f64; 6]| {
+            let a = a - base;
             partial[k * a..k * a + k].iter_mut().zip(sum).for_each(|(p, s)| *p += s);
         };
         let Some(&start) = self.of.get(first) else { return };
@@ -351,29 +417,32 @@ impl CoarseSpace {
         add(current, &sum);
     }
 
-    /// Sums the partial restrictions (`partials`, one [`restricted_len`]
-    /// run per chunk of blocks, in order) to `Pᵀ r` and solves `A_c e =
-    /// Pᵀ r` for the correction `e` that [`prolonged`] reads; returns
-    /// `r · P e`, the correction's share of `r · z`.
+    /// Sums the partial restrictions (`partials`, one [`window_len`] run
+    /// per chunk of blocks, in order) to `Pᵀ r` and solves `A₁ e = Pᵀ r`
+    /// (by the cycle, [`AggregateCycle::apply`]) for the correction `e`
+    /// that [`prolonged`] reads; returns `r · P e`, the correction's share
+    /// of `r · z`.
     ///
-    /// [`restricted_len`]: CoarseSpace::restricted_len
+    /// [`window_len`]: CoarseSpace::window_len
     /// [`prolonged`]: CoarseSpace::prolonged
     pub fn solve(&mut self, partials: &[f64]) -> f64 {
-        let m = self.restricted_len();
+        self.sum_partials(partials);
+        self.cycle.apply(self.system.k, &self.restricted, &mut self.correction);
+        self.restricted.iter().zip(&self.correction).map(|(r, e)| r * e).sum()
+    }
+
+    /// `self.restricted = Pᵀ r` from the chunks' windows, in chunk order.
+    fn sum_partials(&mut self, partials: &[f64]) {
+        let (m, k, w) = (self.restricted_len(), self.modes(), self.window_len());
         self.restricted.clear();
         self.restricted.resize(m, 0.0);
-        for partial in partials.chunks_exact(m) {
-            self.restricted.iter_mut().zip(partial).for_each(|(s, p)| *s += p);
+        for (partial, &first) in partials.chunks_exact(w).zip(&self.window_first) {
+            let at = k * first as usize;
+            // (a window reaching past the last aggregate holds zeros there)
+            let end = (at + w).min(m);
+            self.restricted[at..end].iter_mut().zip(partial).for_each(|(s, p)| *s += p);
         }
-        self.correction.clone_from(&self.restricted);
-        let l = MatRef::from_column_major_slice(&self.factor, m, m);
-        llt::solve::solve_in_place(
-            l,
-            MatMut::from_column_major_slice_mut(&mut self.correction, m, 1),
-            Par::Seq,
-            MemStack::new(&mut []),
-        );
-        self.restricted.iter().zip(&self.correction).map(|(r, e)| r * e).sum()
+        self.correction.resize(m, 0.0);
     }
 
     /// `(P e)_i`, the correction of the last [`CoarseSpace::solve`] at
@@ -391,17 +460,25 @@ impl CoarseSpace {
         add
     }
 
-    /// `z += P A_c⁻¹ Pᵀ r`, restricting per chunk of `chunk_blocks` blocks
-    /// in parallel; returns `r · P A_c⁻¹ Pᵀ r`, the correction's share of
-    /// `r · z`.
-    pub fn correct(&mut self, r: &[f64], z: &mut [f64], chunk_blocks: usize) -> f64 {
-        let m = self.restricted_len();
+    /// `z += P B Pᵀ r` (or, for [`Correction::Groups`], the exact
+    /// correction of the aggregates of aggregates alone, `P T A₂⁻¹ Tᵀ Pᵀ
+    /// r`), restricting per chunk of blocks in parallel; returns `r · z`'s
+    /// share of the correction.
+    pub fn correct(&mut self, r: &[f64], z: &mut [f64], correction: Correction) -> f64 {
+        let (w, chunk_blocks) = (self.window_len(), self.chunk_blocks);
         let mut partials = std::mem::take(&mut self.partial);
-        partials.resize(r.len().div_ceil(3 * chunk_blocks) * m, 0.0);
-        partials.par_chunks_mut(m).zip(r.par_chunks(3 * chunk_blocks)).enumerate().for_each(|(t, (partial, r))| {
-            self.restrict(t * chunk_blocks, r, partial);
+        partials.resize(r.len().div_ceil(3 * chunk_blocks) * w, 0.0);
+        partials.par_chunks_mut(w).zip(r.par_chunks(3 * chunk_blocks)).enumerate().for_each(|(t, (partial, r))| {
+            self.restrict(t, r, partial);
         });
-        let share = self.solve(&partials);
+        let share = match correction {
+            Correction::Whole => self.solve(&partials),
+            Correction::Groups => {
+                self.sum_partials(&partials);
+                self.cycle.apply_groups(self.system.k, &self.restricted, &mut self.correction);
+                self.restricted.iter().zip(&self.correction).map(|(r, e)| r * e).sum()
+            }
+        };
         self.partial = partials;
         z.par_chunks_mut(3 * chunk_blocks).enumerate().for_each(|(t, z)| {
             for (q, z) in z.chunks_exact_mut(3).enumerate() {
@@ -413,9 +490,37 @@ impl CoarseSpace {
     }
 }
 
+/// Which correction [`CoarseSpace::correct`] adds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Correction {
+    /// `P B Pᵀ r`, the coarse level's.
+    Whole,
+    /// The aggregates of aggregates' alone, solved exactly.
+    Groups,
+}
+
 /// The unit vector along axis `c`.
 fn unit(c: usize) -> [f64; 3] {
     std::array::from_fn(|d| if d == c { 1.0 } else { 0.0 })
+}
+
+/// Aggregates of the `count` vertices of `graph` (offsets, neighbours),
+/// coarsened by rounds of [`aggregate`] until at most `limit` remain, and
+/// their number; `None` when the first round merges nothing.
+fn coarsen(graph: &(Vec<u32>, Vec<u32>), count: usize, limit: usize) -> Option<(Vec<u32>, usize)> {
+    let mut of: Vec<u32> = (0..count as u32).collect();
+    let (mut groups, mut quotient_graph) = (count, None::<(Vec<u32>, Vec<u32>)>);
+    while groups > limit {
+        let (ptr, adj) = quotient_graph.as_ref().unwrap_or(graph);
+        let (round, merged) = aggregate(ptr, adj);
+        if merged == groups {
+            break;
+        }
+        of.iter_mut().for_each(|a| *a = round[*a as usize]);
+        quotient_graph = Some(quotient(ptr, adj, &round, merged));
+        groups = merged;
+    }
+    (groups < count).then_some((of, groups))
 }
 
 /// One round of greedy aggregation of the graph whose vertex `v` has the
@@ -482,7 +587,7 @@ fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Ve
 
 /// The vertices of each group of `of` (`count` groups), ascending: group
 /// `a`'s at `members[ptr[a]..ptr[a + 1]]`.
-fn group(of: &[u32], count: usize) -> (Vec<u32>, Vec<u32>) {
+pub(super) fn group(of: &[u32], count: usize) -> (Vec<u32>, Vec<u32>) {
     let mut ptr = vec![0u32; count + 1];
     of.iter().for_each(|&a| ptr[a as usize + 1] += 1);
     (0..count).for_each(|a| ptr[a + 1] += ptr[a]);
@@ -562,15 +667,20 @@ mod tests {
     }
 
     /// Every block has an aggregate, every aggregate is connected in the
-    /// matrix graph, and coarsening stops at the limit.
+    /// matrix graph, one round makes the aggregates (none when the limit
+    /// takes every block), and the aggregates of aggregates are coarsened
+    /// to the limit.
     #[test]
     fn aggregates_cover_every_block_and_are_connected() {
         let (pattern, _) = grid(9, 7, 5);
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
+        let one_round = aggregate(&blocks.ptr, &blocks.rows).1;
         for limit in [1000, 40, 5] {
-            let coarse = CoarseSpace::new(&blocks, limit);
+            let coarse = CoarseSpace::new(&blocks, limit, 1024);
             let m = coarse.aggregates();
-            assert!(m <= limit, "limit {limit}: {m} aggregates");
+            let want = if limit >= 315 { 315 } else { one_round };
+            assert_eq!(m, want, "limit {limit}: {m} aggregates");
+            assert!(coarse.cycle.groups() <= limit, "limit {limit}: {} groups", coarse.cycle.groups());
             assert!(coarse.of.iter().all(|&a| (a as usize) < m));
             for a in 0..m {
                 let members = &coarse.members[coarse.ptr[a] as usize..coarse.ptr[a + 1] as usize];
@@ -613,8 +723,12 @@ mod tests {
         let (pattern, values) = grid(nx, ny, nz);
         let n = pattern.nrows();
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        for rotations in [false, true] {
-            let mut coarse = CoarseSpace::new(&blocks, 12);
+        // (a limit the aggregates of one round stay under: A₁ is solved exactly)
+        let limit = aggregate(&blocks.ptr, &blocks.rows).1;
+        for (rotations, chunk_blocks) in [(false, 1024), (true, 1024), (false, 5), (true, 5)] {
+            // restricted in one chunk, and in chunks of 5 blocks (runs of an
+            // aggregate cut by chunk ends)
+            let mut coarse = CoarseSpace::new(&blocks, limit, chunk_blocks);
             if rotations {
                 // positions may come after a first factor of translations
                 coarse.factor(&blocks, &values).unwrap();
@@ -648,22 +762,60 @@ mod tests {
             let expected = &p * ac.llt(faer::Side::Lower).unwrap().solve(p.transpose() * &r);
             let base: Vec<f64> = (0..n).map(|i| 0.25 * (i as f64).cos()).collect();
             let r_slice: Vec<f64> = (0..n).map(|i| r[(i, 0)]).collect();
-            // restricted in one chunk, and in chunks of 5 blocks (runs of an
-            // aggregate cut by chunk ends)
-            for chunk_blocks in [1024, 5] {
-                let mut z = base.clone();
-                let rz = coarse.correct(&r_slice, &mut z, chunk_blocks);
-                for i in 0..n {
-                    let got = z[i] - base[i];
-                    let want = expected[(i, 0)];
-                    assert!(
-                        (got - want).abs() <= 1e-12 * (1.0 + want.abs()),
-                        "rotations {rotations}, chunks of {chunk_blocks}, entry {i}"
-                    );
-                }
-                let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
-                assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
+            let mut z = base.clone();
+            let rz = coarse.correct(&r_slice, &mut z, Correction::Whole);
+            for i in 0..n {
+                let got = z[i] - base[i];
+                let want = expected[(i, 0)];
+                assert!(
+                    (got - want).abs() <= 1e-12 * (1.0 + want.abs()),
+                    "rotations {rotations}, chunks of {chunk_blocks}, entry {i}"
+                );
             }
+            let dense_rz: f64 = (0..n).map(|i| r[(i, 0)] * expected[(i, 0)]).sum();
+            assert!((rz - dense_rz).abs() <= 1e-12 * dense_rz.abs(), "rotations {rotations}");
+        }
+    }
+
+    /// With more aggregates than the limit, `B` is the cycle: the
+    /// correction `z = P B Pᵀ r` must still be a symmetric positive
+    /// definite operator, as conjugate gradients need (the cycle's formula
+    /// is tested in `aggregate_cycle`, what it saves in `cg`).
+    #[test]
+    fn the_cycle_is_symmetric_and_positive() {
+        // the stiffness of a box of 8 x 8 x 8 cells of tetrahedra plus a
+        // mass-like diagonal, as a step's matrix is
+        use crate::store::{BasisOptions, ElementStore};
+        let mesh = crate::meshing::box_tet([0.0; 3], [1.0; 3], [8; 3]).unwrap();
+        let material = crate::material::Material::new(1e5, 0.3, 1000.0).unwrap();
+        let store = ElementStore::build(&mesh, &material, &BasisOptions::default()).unwrap();
+        let system = crate::assembly::SparsePattern::build(mesh.nodes.len(), &store);
+        let mut values = vec![0.0; system.nnz()];
+        system.assemble(&mut values, |b, i, c, out| store.batches[b].block_column(i, c, out));
+        (0..3 * mesh.nodes.len()).for_each(|d| values[system.diagonal_slot(d)] += 1e2);
+        let (n, blocks) = (3 * mesh.nodes.len(), system.blocks());
+        for rotations in [false, true] {
+            let mut coarse = CoarseSpace::new(blocks, 8, 64);
+            if rotations {
+                coarse.set_positions(&mesh.nodes);
+            }
+            coarse.factor(blocks, &values).unwrap();
+            assert!(!coarse.cycle.is_exact() && coarse.cycle.groups() <= 8, "{} groups", coarse.cycle.groups());
+            let vector = |seed: f64| -> Vec<f64> { (0..n).map(|i| (i as f64 * seed).sin() + 0.3).collect() };
+            let mut apply = |r: &[f64]| -> Vec<f64> {
+                let mut z = vec![0.0; n];
+                coarse.correct(r, &mut z, Correction::Whole);
+                z
+            };
+            let (u, v) = (vector(0.37), vector(1.91));
+            let (bu, bv) = (apply(&u), apply(&v));
+            let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+            let (ubv, vbu) = (dot(&u, &bv), dot(&v, &bu));
+            assert!(
+                (ubv - vbu).abs() <= 1e-10 * ubv.abs().max(vbu.abs()),
+                "rotations {rotations}: {ubv} against {vbu}"
+            );
+            assert!(dot(&u, &bu) > 0.0 && dot(&v, &bv) > 0.0, "rotations {rotations}");
         }
     }
 
@@ -674,7 +826,7 @@ mod tests {
     fn a_failing_coarse_factor_names_a_degree_of_freedom_of_the_system() {
         let (pattern, mut values) = grid(8, 1, 1);
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        let mut coarse = CoarseSpace::new(&blocks, 4);
+        let mut coarse = CoarseSpace::new(&blocks, 4, 1024);
         let a = coarse.aggregates() - 1;
         assert!(a >= 1, "{} aggregates", a + 1);
         // the last aggregate's own couplings negated: its coarse block is
@@ -699,20 +851,20 @@ mod tests {
         for (nx, ny, nz) in [(1, 1, 1), (5, 1, 1)] {
             let (pattern, values) = grid(nx, ny, nz);
             let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-            let mut coarse = CoarseSpace::new(&blocks, 1);
+            let mut coarse = CoarseSpace::new(&blocks, 1, 1024);
             let line: Vec<[f64; 3]> = (0..nx).map(|x| [x as f64, 0.0, 0.0]).collect();
             coarse.set_positions(&line);
             coarse.factor(&blocks, &values).unwrap();
             let r: Vec<f64> = (0..3 * nx).map(|i| 1.0 + i as f64).collect();
             let mut z = vec![0.0; 3 * nx];
-            coarse.correct(&r, &mut z, 1024);
+            coarse.correct(&r, &mut z, Correction::Whole);
             assert!(z.iter().all(|v| v.is_finite()), "{nx} blocks on a line: {z:?}");
             if nx == 1 {
                 // a lone block's correction is its translations' alone
-                let mut translations = CoarseSpace::new(&blocks, 1);
+                let mut translations = CoarseSpace::new(&blocks, 1, 1024);
                 translations.factor(&blocks, &values).unwrap();
                 let mut expected = vec![0.0; 3];
-                translations.correct(&r, &mut expected, 1024);
+                translations.correct(&r, &mut expected, Correction::Whole);
                 for (a, b) in z.iter().zip(&expected) {
                     assert!((a - b).abs() <= 1e-12 * b.abs(), "a lone block: {z:?} vs {expected:?}");
                 }

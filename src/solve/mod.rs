@@ -4,6 +4,7 @@
 //! the values whenever they change ([`LinearSolver::factor`]), and then solves
 //! for any number of right-hand sides.
 
+mod aggregate_cycle;
 mod cg;
 mod cholesky;
 mod coarse;

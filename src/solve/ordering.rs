@@ -154,7 +154,7 @@ impl Renumbering {
                 at += column.len();
             }
         };
-        in_column_tasks(&blocks.ptr, 0..n, 1, &mut blocks.rows, &mut self.source, &sort, |(), ()| ());
+        in_column_tasks(&blocks.ptr, 0..n, 1, &mut blocks.rows, &mut self.source, 1, &sort, |(), ()| ());
     }
 
     /// The renumbered structure.
@@ -173,36 +173,54 @@ impl Renumbering {
     }
 
     /// Writes the values `old` (laid out on the old structure) in the new
-    /// layout, into `out` as they are and into `rounded` rounded to `f32`;
-    /// returns whether every value is finite and whether every rounded one
-    /// is (a finite value beyond `f32`'s range rounds to infinity).
-    pub fn carry_values(&self, old: &[f64], out: &mut [f64], rounded: &mut [f32]) -> (bool, bool) {
+    /// layout rounded to `f32` into `rounded`; returns whether every value
+    /// is finite and whether every rounded one is (a finite value beyond
+    /// `f32`'s range rounds to infinity).
+    pub fn round_values(&self, old: &[f64], rounded: &mut [f32]) -> (bool, bool) {
+        // (every rounded value finite: then so is every value; else the
+        // values themselves are looked at)
+        let in_range = self.carry(old, rounded, |v| v as f32, |out| out.iter().all(|v| v.is_finite()));
+        (in_range || old.par_iter().all(|v| v.is_finite()), in_range)
+    }
+
+    /// Writes the values `old` (laid out on the old structure) in the new
+    /// layout into `out`.
+    pub fn carry_exact(&self, old: &[f64], out: &mut [f64]) {
+        self.carry(old, out, |v| v, |_| true);
+    }
+
+    /// Writes `convert(v)` for every value `v` of `old` (laid out on the
+    /// old structure) into `out` in the new layout; returns whether `check`
+    /// held for every written column.
+    fn carry<T: Copy + Send>(
+        &self,
+        old: &[f64],
+        out: &mut [T],
+        convert: impl Fn(f64) -> T + Sync,
+        check: impl Fn(&[T]) -> bool + Sync,
+    ) -> bool {
         let blocks = &self.blocks;
         let n = blocks.len();
-        let carry = |columns: Range<usize>, out: &mut [f64], rounded: &mut [f32]| {
-            let (mut at, mut finite, mut in_range) = (0, true, true);
+        let carry = |columns: Range<usize>, out: &mut [T], _: &mut [()]| {
+            let (mut at, mut checked) = (0, true);
             for j in columns {
                 let source = &self.source[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
                 let stride = 3 * source.len();
                 let column = &old[self.old_start[j]..self.old_start[j] + 3 * stride];
-                let (out, rounded) = (&mut out[at..at + 3 * stride], &mut rounded[at..at + 3 * stride]);
-                for c in 0..3 {
-                    for (k, &q) in source.iter().enumerate() {
-                        let (to, from) = (c * stride + 3 * k, c * stride + 3 * q as usize);
-                        for r in 0..3 {
-                            let v = column[from + r];
-                            out[to + r] = v;
-                            rounded[to + r] = v as f32;
-                            finite &= v.is_finite();
-                            in_range &= (v as f32).is_finite();
-                        }
+                let out = &mut out[at..at + 3 * stride];
+                for (column, out) in column.chunks_exact(stride).zip(out.chunks_exact_mut(stride)) {
+                    for (to, &q) in out.chunks_exact_mut(3).zip(source) {
+                        let q = 3 * q as usize;
+                        let from = &column[q..q + 3];
+                        (to[0], to[1], to[2]) = (convert(from[0]), convert(from[1]), convert(from[2]));
                     }
                 }
+                checked &= check(out);
                 at += 3 * stride;
             }
-            (finite, in_range)
+            checked
         };
-        in_column_tasks(&blocks.ptr, 0..n, 9, out, rounded, &carry, |a, b| (a.0 && b.0, a.1 && b.1))
+        in_column_tasks(&blocks.ptr, 0..n, 9, out, &mut [], 0, &carry, |a, b| a && b)
     }
 
     /// `new[b] = old[order[b]]`: a vector of the old numbering in the new.
@@ -221,12 +239,14 @@ impl Renumbering {
 /// laid out along the columns, `per_block` entries per block, the columns'
 /// block offsets `ptr`), halving the range (without allocating); combines
 /// the tasks' results in column order.
+#[allow(clippy::too_many_arguments)]
 fn in_column_tasks<A: Send, B: Send, R: Send>(
     ptr: &[u32],
     columns: Range<usize>,
     per_block: usize,
     a: &mut [A],
     b: &mut [B],
+    per_block_b: usize,
     task: &(impl Fn(Range<usize>, &mut [A], &mut [B]) -> R + Sync),
     combine: fn(R, R) -> R,
 ) -> R {
@@ -234,11 +254,11 @@ fn in_column_tasks<A: Send, B: Send, R: Send>(
         return task(columns, a, b);
     }
     let mid = columns.start + columns.len() / 2;
-    let split = per_block * (ptr[mid] - ptr[columns.start]) as usize;
-    let ((a0, a1), (b0, b1)) = (a.split_at_mut(split), b.split_at_mut(split));
+    let blocks = (ptr[mid] - ptr[columns.start]) as usize;
+    let ((a0, a1), (b0, b1)) = (a.split_at_mut(per_block * blocks), b.split_at_mut(per_block_b * blocks));
     let (left, right) = rayon::join(
-        || in_column_tasks(ptr, columns.start..mid, per_block, a0, b0, task, combine),
-        || in_column_tasks(ptr, mid..columns.end, per_block, a1, b1, task, combine),
+        || in_column_tasks(ptr, columns.start..mid, per_block, a0, b0, per_block_b, task, combine),
+        || in_column_tasks(ptr, mid..columns.end, per_block, a1, b1, per_block_b, task, combine),
     );
     combine(left, right)
 }
@@ -325,7 +345,8 @@ mod tests {
         let mut renumbering = Renumbering::default();
         renumbering.renew(&old);
         let (mut out, mut rounded) = (vec![0.0; values.len()], vec![0.0f32; values.len()]);
-        assert_eq!(renumbering.carry_values(&values, &mut out, &mut rounded), (true, true));
+        assert_eq!(renumbering.round_values(&values, &mut rounded), (true, true));
+        renumbering.carry_exact(&values, &mut out);
         let (new, order) = (renumbering.blocks(), renumbering.order());
         for j in 0..new.len() {
             let rows = new.column_rows(j);
@@ -346,9 +367,9 @@ mod tests {
         assert_eq!(back, v);
         assert_eq!(there[0], v[order[0] as usize]);
         values[17] = 1e39;
-        assert_eq!(renumbering.carry_values(&values, &mut out, &mut rounded), (true, false));
+        assert_eq!(renumbering.round_values(&values, &mut rounded), (true, false));
         values[17] = f64::NAN;
-        assert!(!renumbering.carry_values(&values, &mut out, &mut rounded).0);
+        assert!(!renumbering.round_values(&values, &mut rounded).0);
     }
 
     #[test]

@@ -1,0 +1,502 @@
+//! The aggregates' part of the coarse level: `A₁ e = g` for the rigid
+//! motions of the node aggregates, approximately by a two-level additive
+//! correction, or exactly when there are few aggregates.
+//!
+//! `A₁ = Pᵀ A P` couples each aggregate's `k` modes (three translations,
+//! and three rotations when the nodes have positions) with those of its
+//! neighbours: a sparse matrix of `k x k` blocks on the graph of the
+//! aggregates ([`AggregateMatrix`]). On bunny_100k one aggregation round
+//! gives 687 aggregates, 4,122 modes; its sparse Cholesky factor held 0.8M
+//! values and took 29 ms to compute and 0.9 ms to apply (2 cores, AMD
+//! EPYC), as much as the fine product it would accompany in every
+//! iteration. The cycle instead applies
+//!
+//! ```text
+//! e = T A₂⁻¹ Tᵀ g + D⁻¹ g
+//! ```
+//!
+//! `D` the `k x k` diagonal blocks of `A₁`, `T` the map from the rigid
+//! motions of each aggregate of aggregates (a group) to those of its
+//! aggregates, `A₂ = Tᵀ A₁ T` (a dense matrix of a few hundred modes): a
+//! symmetric positive definite operator, as conjugate gradients need of
+//! their preconditioner, that reads no more than `D` and the factor of
+//! `A₂`. Multiplicative forms (a Chebyshev smoothing of degree 1 or 2
+//! around the groups' correction) took 20 to 25% fewer iterations of the
+//! conjugate gradients on the clamped bunny's steps, but their two or
+//! three products with `A₁` per iteration cost more than those iterations
+//! (bunny_100k clamped at 1e-8, 2 cores, AMD EPYC: 79 iterations per step
+//! and 88 ms of solve additive, 64 and 91 ms with degree 2, 107 and 101 ms
+//! with the 32 aggregates of one dense level alone).
+//!
+//! Every sum runs in a fixed order: the same bits on any number of threads.
+
+use cleave_kernels::vec3::cross;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt;
+use faer::{MatMut, MatRef, Par};
+use rayon::prelude::*;
+
+/// The regularisation of a rotation's diagonal, relative to the largest
+/// diagonal entry: an aggregate too small or too flat to rotate (one node,
+/// nodes on a line) has rotations of no stiffness, whose rows of `P` are
+/// zero; with it every factor exists and such a mode corrects nothing.
+pub(super) const ROTATION_FLOOR: f64 = 1e-12;
+
+/// `A₁`: symmetric, both triangles stored, `k x k` blocks. Block column
+/// `b` holds the blocks of rows `rows[ptr[b]..ptr[b + 1]]` (ascending),
+/// block `p` at `values[k² p..k² (p + 1)]` with entry `(r, c)` at `c k + r`.
+#[derive(Clone, Debug, Default)]
+pub(super) struct AggregateMatrix {
+    /// Modes per aggregate, 3 or 6.
+    pub k: usize,
+    pub ptr: Vec<u32>,
+    pub rows: Vec<u32>,
+    pub values: Vec<f64>,
+}
+
+impl AggregateMatrix {
+    /// Number of aggregates.
+    pub fn aggregates(&self) -> usize {
+        self.ptr.len().saturating_sub(1)
+    }
+
+    /// The block of column `b` in row `a`, if the graph couples them.
+    pub fn slot(&self, a: u32, b: usize) -> Option<usize> {
+        let rows = &self.rows[self.ptr[b] as usize..self.ptr[b + 1] as usize];
+        rows.binary_search(&a).ok().map(|p| self.ptr[b] as usize + p)
+    }
+
+    /// The values of block `p`.
+    fn block(&self, p: usize) -> &[f64] {
+        let kk = self.k * self.k;
+        &self.values[kk * p..kk * (p + 1)]
+    }
+}
+
+/// Why a factor of the aggregates' system failed: the aggregate (of `A₁`)
+/// whose mode was not positive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct NotPositive {
+    pub aggregate: usize,
+}
+
+/// The approximate (or exact) solve of `A₁` and its workspace.
+#[derive(Default)]
+pub(super) struct AggregateCycle {
+    /// Aggregate of aggregates of every aggregate, and their number.
+    of: Vec<u32>,
+    groups: usize,
+    /// Aggregates of group `g` at `members[ptr[g]..ptr[g + 1]]`.
+    ptr: Vec<u32>,
+    members: Vec<u32>,
+    /// Every aggregate's centroid from its group's (m), with rotations.
+    offsets: Vec<[f64; 3]>,
+    /// Whether every aggregate is its own group: the cycle is then the
+    /// exact solve of `A₁`.
+    exact: bool,
+    /// The inverses of the diagonal blocks of `A₁` (`k x k`, column-major).
+    inverse: Vec<f64>,
+    /// `A₂ = Tᵀ A₁ T`, dense, overwritten by its lower Cholesky factor.
+    factor: Vec<f64>,
+    stack: Option<MemBuffer>,
+    /// Work vector of the modes of `A₂`.
+    coarse: Vec<f64>,
+}
+
+impl AggregateCycle {
+    /// The cycle for `aggregates` aggregates grouped by `of` (`groups`
+    /// groups; `None`: each its own, the exact solve), in the memory of
+    /// `old`.
+    pub fn renew(aggregates: usize, grouping: Option<(Vec<u32>, usize)>, old: Self) -> Self {
+        let exact = grouping.is_none();
+        let (of, groups) = grouping.unwrap_or_else(|| ((0..aggregates as u32).collect(), aggregates));
+        let (ptr, members) = super::coarse::group(&of, groups);
+        AggregateCycle { of, groups, ptr, members, exact, factor: old.factor, stack: old.stack, ..Default::default() }
+    }
+
+    /// Number of aggregates of aggregates.
+    #[cfg(test)]
+    pub fn groups(&self) -> usize {
+        self.groups
+    }
+
+    /// Whether the cycle is the exact solve of `A₁`.
+    #[cfg(test)]
+    pub fn is_exact(&self) -> bool {
+        self.exact
+    }
+
+    /// Takes the aggregates' centroids (m) and their member offsets
+    /// (aggregate `a` has `member_ptr[a + 1] - member_ptr[a]` nodes): each
+    /// group's rotations turn about the centroid of all its nodes.
+    pub fn set_centroids(&mut self, centroids: &[[f64; 3]], member_ptr: &[u32]) {
+        self.offsets.clear();
+        self.offsets.resize(centroids.len(), [0.0; 3]);
+        for g in 0..self.groups {
+            let members = &self.members[self.ptr[g] as usize..self.ptr[g + 1] as usize];
+            let (mut sum, mut weight) = ([0.0; 3], 0.0);
+            for &a in members {
+                let w = f64::from(member_ptr[a as usize + 1] - member_ptr[a as usize]);
+                (0..3).for_each(|d| sum[d] += w * centroids[a as usize][d]);
+                weight += w;
+            }
+            for &a in members {
+                let c = centroids[a as usize];
+                self.offsets[a as usize] = std::array::from_fn(|d| c[d] - sum[d] / weight.max(1.0));
+            }
+        }
+    }
+
+    /// Readies the cycle for `a1`: inverts its diagonal blocks, assembles
+    /// and factors `A₂`.
+    pub fn factor(&mut self, a1: &AggregateMatrix) -> Result<(), NotPositive> {
+        let (k, m) = (a1.k, a1.aggregates());
+        let rotations = k == 6 && self.offsets.len() == m;
+        self.coarse.resize(k * self.groups, 0.0);
+        if !self.exact {
+            self.inverse.resize(k * k * m, 0.0);
+            let failed = (self.inverse.par_chunks_mut(k * k).enumerate())
+                .map(|(a, inv)| {
+                    let p = a1.slot(a as u32, a).expect("every aggregate couples to itself");
+                    invert_spd(a1.block(p), inv, k).err().map(|()| a)
+                })
+                .min();
+            if let Some(aggregate) = failed.flatten() {
+                return Err(NotPositive { aggregate });
+            }
+        }
+        self.factor_groups(a1, rotations)
+    }
+
+    /// `A₂ = Tᵀ A₁ T` (dense, group columns in parallel) and its Cholesky
+    /// factor.
+    fn factor_groups(&mut self, a1: &AggregateMatrix, rotations: bool) -> Result<(), NotPositive> {
+        let (k, kk) = (a1.k, a1.k * a1.k);
+        let n = k * self.groups;
+        let mut dense = std::mem::take(&mut self.factor);
+        dense.resize(n * n, 0.0);
+        let this = &*self;
+        dense.par_chunks_mut(k * n).enumerate().for_each(|(g, cols)| {
+            cols.fill(0.0);
+            for &b in &this.members[this.ptr[g] as usize..this.ptr[g + 1] as usize] {
+                let b = b as usize;
+                for p in a1.ptr[b] as usize..a1.ptr[b + 1] as usize {
+                    let a = a1.rows[p] as usize;
+                    let block = &a1.values[kk * p..kk * (p + 1)];
+                    let row = k * this.of[a] as usize;
+                    add_transferred(block, this.offset(a, rotations), this.offset(b, rotations), k, |r, c, v| {
+                        cols[c * n + row + r] += v;
+                    });
+                }
+            }
+        });
+        let stack = self.stack.get_or_insert_with(|| MemBuffer::new(cholesky_scratch(n)));
+        if stack.len() < cholesky_scratch(n).size_bytes() {
+            *stack = MemBuffer::new(cholesky_scratch(n));
+        }
+        let result = llt::factor::cholesky_in_place(
+            MatMut::from_column_major_slice_mut(&mut dense, n, n),
+            Default::default(),
+            Par::Seq,
+            MemStack::new(stack),
+            Default::default(),
+        );
+        self.factor = dense;
+        match result {
+            Ok(_) => Ok(()),
+            Err(llt::factor::LltError::NonPositivePivot { index }) => {
+                Err(NotPositive { aggregate: self.members[self.ptr[index / k] as usize] as usize })
+            }
+        }
+    }
+
+    /// Aggregate `a`'s centroid from its group's, with rotations.
+    fn offset(&self, a: usize, rotations: bool) -> Option<[f64; 3]> {
+        rotations.then(|| self.offsets[a])
+    }
+
+    /// `e ≈ A₁⁻¹ g` by the cycle (see the module docs), or exactly.
+    pub fn apply(&mut self, k: usize, g: &[f64], e: &mut [f64]) {
+        self.apply_groups(k, g, e);
+        if self.exact {
+            return;
+        }
+        let blocks = self.inverse.chunks_exact(k * k).zip(g.chunks_exact(k)).zip(e.chunks_exact_mut(k));
+        for ((m, g), e) in blocks {
+            for (r, e) in e.iter_mut().enumerate() {
+                *e += (0..k).map(|c| m[c * k + r] * g[c]).sum::<f64>();
+            }
+        }
+    }
+
+    /// `e = T A₂⁻¹ Tᵀ g`: the exact correction of the aggregates of
+    /// aggregates alone (all of the cycle when it is exact).
+    pub fn apply_groups(&mut self, k: usize, g: &[f64], e: &mut [f64]) {
+        self.restrict(g, k);
+        let mut coarse = std::mem::take(&mut self.coarse);
+        self.solve_groups(k, &mut coarse);
+        e.fill(0.0);
+        self.prolong(&coarse, e, k);
+        self.coarse = coarse;
+    }
+
+    /// `self.coarse = Tᵀ r`, summed over each group's aggregates in order.
+    fn restrict(&mut self, r: &[f64], k: usize) {
+        self.coarse.fill(0.0);
+        for (a, ra) in r.chunks_exact(k).enumerate() {
+            let g = k * self.of[a] as usize;
+            (0..3).for_each(|s| self.coarse[g + s] += ra[s]);
+            if k == 6 {
+                let d = self.offsets.get(a).copied().unwrap_or([0.0; 3]);
+                let w = cross(d, [ra[0], ra[1], ra[2]]);
+                (0..3).for_each(|s| self.coarse[g + 3 + s] += ra[3 + s] + w[s]);
+            }
+        }
+    }
+
+    /// `x += T e`.
+    fn prolong(&self, e: &[f64], x: &mut [f64], k: usize) {
+        for (a, xa) in x.chunks_exact_mut(k).enumerate() {
+            let g = k * self.of[a] as usize;
+            (0..k).for_each(|s| xa[s] += e[g + s]);
+            if k == 6 {
+                let d = self.offsets.get(a).copied().unwrap_or([0.0; 3]);
+                let w = cross([e[g + 3], e[g + 4], e[g + 5]], d);
+                (0..3).for_each(|s| xa[s] += w[s]);
+            }
+        }
+    }
+
+    /// `v = A₂⁻¹ v` by the dense factor.
+    fn solve_groups(&self, k: usize, v: &mut [f64]) {
+        let n = k * self.groups;
+        llt::solve::solve_in_place(
+            MatRef::from_column_major_slice(&self.factor, n, n),
+            MatMut::from_column_major_slice_mut(v, n, 1),
+            Par::Seq,
+            MemStack::new(&mut []),
+        );
+    }
+}
+
+/// `add(r, c, (T_aᵀ M T_b)[r][c])` for the `k x k` block `M` (column-major)
+/// and the maps `T_a`, `T_b` from a group's modes to its aggregates' (see
+/// [`AggregateCycle`]): with rotations (offsets `d_a`, `d_b` of the
+/// aggregates' centroids from their groups') `T = [I  X; 0  I]`, `X =
+/// -[d]×` (a rigid motion `(t, ω)` of the group moves the aggregate by `t
+/// + ω × d` and turns it by `ω`), so that `M T_b` is `M` with `M₀ X_b`
+/// added to its last three columns (`M₀` its first three), and `T_aᵀ N` is
+/// `N` with `X_aᵀ N₀ = d_a × N₀` added to its last three rows (`N₀` its
+/// first three); without rotations `T = I`.
+fn add_transferred(
+    m: &[f64],
+    d_a: Option<[f64; 3]>,
+    d_b: Option<[f64; 3]>,
+    k: usize,
+    mut add: impl FnMut(usize, usize, f64),
+) {
+    let (Some(d_a), Some(d_b)) = (d_a, d_b) else {
+        (0..k * k).for_each(|e| add(e % k, e / k, m[e]));
+        return;
+    };
+    // n = M T_b, column-major 6 x 6; column 3 + c gains M₀ (e_c × d_b)
+    let mut n = [0.0; 36];
+    n.copy_from_slice(&m[..36]);
+    for c in 0..3 {
+        let w = cross(unit(c), d_b);
+        for r in 0..6 {
+            n[(3 + c) * 6 + r] += (0..3).map(|q| m[q * 6 + r] * w[q]).sum::<f64>();
+        }
+    }
+    // rows 3..6 of every column gain d_a × (rows 0..3 of it)
+    for c in 0..6 {
+        let top = [n[c * 6], n[c * 6 + 1], n[c * 6 + 2]];
+        let w = cross(d_a, top);
+        (0..3).for_each(|r| add(r, c, top[r]));
+        (0..3).for_each(|r| add(3 + r, c, n[c * 6 + 3 + r] + w[r]));
+    }
+}
+
+/// Scratch of the dense Cholesky factor of order `n`.
+fn cholesky_scratch(n: usize) -> faer::dyn_stack::StackReq {
+    llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default())
+}
+
+/// The inverse `inv` of the symmetric positive definite `k x k` matrix `m`
+/// (column-major), by Cholesky; an error where a pivot is not positive.
+fn invert_spd(m: &[f64], inv: &mut [f64], k: usize) -> Result<(), ()> {
+    // lower factor L (column-major) of m, then inv = L⁻ᵀ L⁻¹ column by column
+    let mut l = [0.0; 36];
+    for j in 0..k {
+        let s = m[j * k + j] - (0..j).map(|p| l[p * k + j] * l[p * k + j]).sum::<f64>();
+        if !(s > 0.0) {
+            return Err(());
+        }
+        let pivot = s.sqrt();
+        l[j * k + j] = pivot;
+        for i in j + 1..k {
+            l[j * k + i] = (m[j * k + i] - (0..j).map(|p| l[p * k + i] * l[p * k + j]).sum::<f64>()) / pivot;
+        }
+    }
+    for c in 0..k {
+        // L y = e_c, then Lᵀ x = y
+        let mut y = [0.0; 6];
+        for i in 0..k {
+            let rhs = f64::from(u8::from(i == c)) - (0..i).map(|p| l[p * k + i] * y[p]).sum::<f64>();
+            y[i] = rhs / l[i * k + i];
+        }
+        for i in (0..k).rev() {
+            let rhs = y[i] - (i + 1..k).map(|p| l[i * k + p] * inv[c * k + p]).sum::<f64>();
+            inv[c * k + i] = rhs / l[i * k + i];
+        }
+    }
+    Ok(())
+}
+
+/// The unit vector along axis `c`.
+fn unit(c: usize) -> [f64; 3] {
+    std::array::from_fn(|d| if d == c { 1.0 } else { 0.0 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::prelude::Solve;
+
+    #[test]
+    fn inverses_of_positive_definite_blocks() {
+        let k = 6;
+        let m: Vec<f64> = (0..36)
+            .map(|e| {
+                let (r, c) = (e % 6, e / 6);
+                if r == c {
+                    10.0 + r as f64
+                } else {
+                    1.0 / (1.0 + (r + c) as f64)
+                }
+            })
+            .collect();
+        let mut inv = vec![0.0; 36];
+        invert_spd(&m, &mut inv, k).unwrap();
+        for r in 0..k {
+            for c in 0..k {
+                let p: f64 = (0..k).map(|s| m[s * k + r] * inv[c * k + s]).sum();
+                assert!((p - f64::from(u8::from(r == c))).abs() < 1e-14, "({r}, {c}): {p}");
+            }
+        }
+        let mut negative = m.clone();
+        negative[14] = -1.0;
+        assert!(invert_spd(&negative, &mut inv, k).is_err());
+    }
+
+    /// `T_aᵀ M T_b` by the structure of `T` against the product of the
+    /// matrices written out: `T = [I  -[d]×; 0  I]`.
+    #[test]
+    fn a_block_carried_to_the_groups_is_the_triple_product() {
+        let m: Vec<f64> = (0..36).map(|e| ((e * 7 + 3) % 11) as f64 - 4.5).collect();
+        let (d_a, d_b) = ([0.3, -1.2, 0.7], [-0.4, 0.25, 1.5]);
+        let t = |d: [f64; 3]| -> [[f64; 6]; 6] {
+            let mut t = [[0.0; 6]; 6];
+            (0..6).for_each(|i| t[i][i] = 1.0);
+            for c in 0..3 {
+                let w = cross(unit(c), d);
+                (0..3).for_each(|r| t[r][3 + c] = w[r]);
+            }
+            t
+        };
+        let (ta, tb) = (t(d_a), t(d_b));
+        let entry = |r: usize, c: usize| m[c * 6 + r];
+        let mut got = [[0.0; 6]; 6];
+        add_transferred(&m, Some(d_a), Some(d_b), 6, |r, c, v| got[r][c] += v);
+        for r in 0..6 {
+            for c in 0..6 {
+                let want: f64 = (0..6)
+                    .flat_map(|s| (0..6).map(move |u| (s, u)))
+                    .map(|(s, u)| ta[s][r] * entry(s, u) * tb[u][c])
+                    .sum();
+                assert!((got[r][c] - want).abs() < 1e-12, "({r}, {c}): {} against {want}", got[r][c]);
+            }
+        }
+    }
+
+    /// The cycle against its formula written out densely: `e = T A₂⁻¹ Tᵀ
+    /// g + D⁻¹ g` with `A₂ = Tᵀ A₁ T`, for five aggregates on a chain in two
+    /// groups, with rotations (`T` per aggregate `[I  -[d]×; 0  I]`, `d` its
+    /// centroid from its group's, weighted by the member counts) and
+    /// without (`T` per aggregate `I`).
+    #[test]
+    fn the_cycle_is_its_formula() {
+        let (m, of) = (5usize, vec![0u32, 0, 1, 1, 1]);
+        let centroids = [[0.0, 0.1, 0.2], [1.0, -0.3, 0.4], [2.1, 0.5, -0.2], [2.9, 0.0, 0.3], [4.2, -0.1, 0.1]];
+        let (counts, member_ptr) = ([3u32, 5, 2, 4, 1], [0u32, 3, 8, 10, 14, 15]);
+        for k in [3usize, 6] {
+            // A₁ on the chain: symmetric, diagonally dominant
+            let entry = |a: usize, b: usize, r: usize, c: usize| -> f64 {
+                let (i, j) = (k * a + r, k * b + c);
+                let off = 0.3 * ((i * 7 + j * 7 + i * j) % 5) as f64 / 5.0 - 0.15;
+                if i == j {
+                    4.0 + r as f64
+                } else {
+                    off
+                }
+            };
+            let (mut ptr, mut rows, mut values) = (vec![0u32], vec![], vec![]);
+            for b in 0..m {
+                for a in b.saturating_sub(1)..(b + 2).min(m) {
+                    rows.push(a as u32);
+                    (0..k * k).for_each(|e| values.push(entry(a, b, e % k, e / k)));
+                }
+                ptr.push(rows.len() as u32);
+            }
+            let a1 = AggregateMatrix { k, ptr, rows, values };
+            let mut cycle = AggregateCycle::renew(m, Some((of.clone(), 2)), AggregateCycle::default());
+            if k == 6 {
+                cycle.set_centroids(&centroids, &member_ptr);
+            }
+            cycle.factor(&a1).unwrap();
+            let dense_a1 = faer::Mat::<f64>::from_fn(k * m, k * m, |i, j| {
+                let (a, b) = (i / k, j / k);
+                if a.abs_diff(b) <= 1 {
+                    entry(a, b, i % k, j % k)
+                } else {
+                    0.0
+                }
+            });
+            let t = faer::Mat::<f64>::from_fn(k * m, 2 * k, |i, j| {
+                let (a, r, c) = (i / k, i % k, j % k);
+                if of[a] as usize != j / k {
+                    return 0.0;
+                }
+                match (r < 3, c < 3) {
+                    (_, _) if r == c => 1.0,
+                    (true, false) => {
+                        // the group's weighted centroid, then -[d]× column c - 3
+                        let members: Vec<usize> = (0..m).filter(|&b| of[b] == of[a]).collect();
+                        let weight: f64 = members.iter().map(|&b| f64::from(counts[b])).sum();
+                        let d: [f64; 3] = std::array::from_fn(|x| {
+                            let mean: f64 = members.iter().map(|&b| f64::from(counts[b]) * centroids[b][x]).sum();
+                            centroids[a][x] - mean / weight
+                        });
+                        cross(unit(c - 3), d)[r]
+                    }
+                    _ => 0.0,
+                }
+            });
+            let a2 = t.transpose() * &dense_a1 * &t;
+            let g = faer::Mat::<f64>::from_fn(k * m, 1, |i, _| (i as f64 * 0.9).sin() + 0.2);
+            let mut want = &t * a2.llt(faer::Side::Lower).unwrap().solve(t.transpose() * &g);
+            for a in 0..m {
+                let block = dense_a1.submatrix(k * a, k * a, k, k).to_owned();
+                let local = block.llt(faer::Side::Lower).unwrap().solve(g.submatrix(k * a, 0, k, 1));
+                (0..k).for_each(|r| want[(k * a + r, 0)] += local[(r, 0)]);
+            }
+            let g: Vec<f64> = (0..k * m).map(|i| g[(i, 0)]).collect();
+            let mut got = vec![0.0; k * m];
+            cycle.apply(k, &g, &mut got);
+            for i in 0..k * m {
+                let w = want[(i, 0)];
+                assert!((got[i] - w).abs() <= 1e-12 * (1.0 + w.abs()), "k = {k}, entry {i}: {} against {w}", got[i]);
+            }
+        }
+    }
+}
