@@ -615,8 +615,9 @@ enum Support {
 /// of a body under gravity, held as `support` says (E = 1e7 Pa, ν = 0.35,
 /// ρ = 1000 kg/m³, h = 0.01 s, CG to the relative residual `tolerance`),
 /// and the step in passes over `K`: its time over that of one read of as
-/// many `f64` values as `K` stores (a parallel dot product, the same
-/// threads), the memory-bound unit the step's kernels are measured in.
+/// many `f64` values as `K` stores from memory, at the read bandwidth of
+/// [`read_bandwidth`] (the same threads), the memory-bound unit the step's
+/// kernels are measured in.
 fn step_measurements(
     label: &str,
     mesh: PolyMesh,
@@ -660,8 +661,8 @@ fn step_measurements(
     if support == Support::ClampedBase {
         kind.push_str(", clamped base");
     }
-    let k_values = vec![1.0; sim.pattern().nnz()];
-    let (pass_ms, _) = best_ms(20, || cleave::solve::dot(&k_values, &k_values));
+    let bytes_per_ms = read_bandwidth();
+    let pass_ms = (8 * sim.pattern().nnz()) as f64 / bytes_per_ms;
     let m = |name: String, ms: f64, extra: Option<(String, f64)>| Measurement {
         name,
         mesh: label.to_string(),
@@ -681,8 +682,19 @@ fn step_measurements(
         m(format!("step contacts+constraints+integrate ({kind})"), rest, None),
         m(format!("step solve ({kind})"), sol, Some(("iterations/step".into(), iterations as f64 / steps as f64))),
         m(format!("step total ({kind})"), total, Some(("passes over K".into(), total / pass_ms))),
-        m("one pass over K (f64 read)".into(), pass_ms, None),
+        m("one pass over K (f64 read)".into(), pass_ms, Some(("read GB/s".into(), bytes_per_ms * 1e-6))),
     ])
+}
+
+/// Bytes per millisecond the threads read from memory: the best of five
+/// parallel dot products of a 256 MB vector with itself (eight times the
+/// last-level cache of the machines we measure on, so that the read
+/// streams from memory; the lanes of [`cleave::solve::dot`] keep up with
+/// it).
+fn read_bandwidth() -> f64 {
+    let values = vec![1.0f64; 32 << 20];
+    let (ms, _) = best_ms(5, || cleave::solve::dot(&values, &values));
+    (8 * values.len()) as f64 / ms
 }
 
 /// A row of a whole-mesh stage.
