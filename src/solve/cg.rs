@@ -100,7 +100,9 @@ pub struct ConjugateGradient {
     z: Vec<f64>,
     p: Vec<f64>,
     ap: Vec<f64>,
-    /// The blocks' positions in the solver's numbering.
+    /// The blocks' positions in the solver's numbering (empty when the
+    /// caller gave none, or positions of another length), handed to the
+    /// coarse level when it is refreshed.
     positions: Vec<[f64; 3]>,
     /// `Rᵀ r` and `A₀⁻¹ Rᵀ r` of the rotated preconditioner.
     rotated: Vec<f64>,
@@ -108,6 +110,8 @@ pub struct ConjugateGradient {
     rest: Option<RestPreconditioner>,
     /// The coarse level added to block Jacobi, when chosen.
     coarse: Option<CoarseSpace>,
+    /// When the coarse level is assembled and factored again.
+    coarse_age: CoarseAge,
     /// The last corrections of the guess, from whose span each solve
     /// starts (see [`SolutionHistory`]).
     history: SolutionHistory,
@@ -124,6 +128,62 @@ pub struct ConjugateGradient {
 /// 108 clamped; 12: 49 and 96; and whole solutions kept instead of
 /// corrections, 8: 57 and 111.)
 const KEPT_CORRECTIONS: usize = 8;
+
+/// Solves a coarse level serves before it is assembled and factored
+/// again from the matrix of the moment. A step's matrix moves little from
+/// one step to the next (the rotations turn, the contacts come and go),
+/// and any symmetric positive definite coarse solve keeps the
+/// preconditioner one: a lagged coarse level changes how fast the
+/// iteration converges, never what it converges to. On bunny_100k (20
+/// steps as `cleave bench` takes them, AMD EPYC 2 cores) a level refreshed
+/// every 2, 4 or 8 solves took the same iterations to 0.1 per step as one
+/// refreshed every solve (clamped base: 43.1 at 1e-6, 79.8 at 1e-8;
+/// falling: 1.6 and 5.5), and a refresh costs 4.4 ms (2.0 summing the
+/// values' runs, 1.4 assembling `Pᵀ A P`, 0.9 factoring).
+const COARSE_REFRESH: usize = 4;
+
+/// The age of the coarse level's factor: solves since it was made, the
+/// iterations of the first of them and of the last. It is made again
+/// when it has served [`COARSE_REFRESH`] solves, when a solve takes more
+/// than half as many iterations again as the first one did (plus two: a
+/// lagged level that stopped fitting the matrix, after a jump in the
+/// contacts or the constraints), after a failed solve, and after every
+/// analysis. The counts are deterministic, so is the choice.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct CoarseAge {
+    /// `None`: no factor fits the current pattern (or the last solve failed).
+    solves: Option<usize>,
+    first: usize,
+    last: usize,
+}
+
+impl CoarseAge {
+    /// Whether the next factor must make the coarse level again.
+    fn due(&self) -> bool {
+        match self.solves {
+            None => true,
+            Some(solves) => solves >= COARSE_REFRESH || (solves > 0 && 2 * self.last > 3 * self.first + 4),
+        }
+    }
+
+    /// The coarse level was made from the current matrix.
+    fn refreshed(&mut self) {
+        *self = CoarseAge { solves: Some(0), first: 0, last: 0 };
+    }
+
+    /// A solve ended, in `iterations` iterations, or failed (`None`).
+    fn solved(&mut self, iterations: Option<usize>) {
+        match (self.solves, iterations) {
+            (Some(solves), Some(iterations)) => {
+                if solves == 0 {
+                    self.first = iterations;
+                }
+                (self.solves, self.last) = (Some(solves + 1), iterations);
+            }
+            _ => self.solves = None,
+        }
+    }
+}
 
 /// The 3x3 block structure of a matrix in the layout of
 /// `assembly::SparsePattern`, where every block column repeats its block
@@ -273,6 +333,7 @@ impl ConjugateGradient {
             rest: None,
             coarse: None,
             history: SolutionHistory::new(KEPT_CORRECTIONS),
+            coarse_age: CoarseAge::default(),
         }
     }
 
@@ -752,6 +813,8 @@ impl LinearSolver for ConjugateGradient {
         let limit = aggregate_limit(pattern.row_idx().len());
         let old = self.coarse.take().unwrap_or_default();
         self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, CHUNK_BLOCKS, old));
+        self.coarse_age = CoarseAge::default();
+        self.positions.clear();
         if let Some(rest) = self.rest.as_mut() {
             rest.ready = false;
         }
@@ -790,13 +853,16 @@ impl LinearSolver for ConjugateGradient {
         if !rounded {
             self.carry_exact(val);
         }
-        if let Some(coarse) = self.coarse.as_mut() {
+        if let Some(coarse) = self.coarse.as_mut().filter(|_| self.coarse_age.due()) {
             // (from the values the iteration reads: the preconditioner
             // need not be exact, and they are half the bytes)
+            coarse.set_positions(&self.positions);
+            self.coarse_age = CoarseAge::default();
             match self.rounded {
                 true => coarse.factor(self.numbering.blocks(), &self.values32)?,
                 false => coarse.factor(self.numbering.blocks(), &self.values)?,
             }
+            self.coarse_age.refreshed();
         }
         // one coarse vector per chunk of the update pass (one value per
         // chunk without a coarse level)
@@ -832,6 +898,7 @@ impl LinearSolver for ConjugateGradient {
         self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
         self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
         let stats = self.solve_own((matrix.parts().1, b), &b_own, &mut x_own);
+        self.coarse_age.solved(stats.as_ref().ok().map(|s| s.iterations));
         self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
         (self.b, self.x) = (b_own, x_own);
         stats
@@ -850,16 +917,16 @@ impl LinearSolver for ConjugateGradient {
         self.rest.is_some()
     }
 
+    /// The positions are kept for the next refresh of the coarse level
+    /// (see [`CoarseAge`]): a lagged level keeps the rigid motions it was
+    /// made with, so that its factor stays the one of its own `Pᵀ A P`.
     fn set_positions(&mut self, positions: &[[f64; 3]]) {
-        if let Some(coarse) = self.coarse.as_mut() {
-            // (positions of another length are refused by the coarse level)
-            if positions.len() == self.numbering.order().len() {
-                self.positions.resize(positions.len(), [0.0; 3]);
-                self.numbering.to_new(positions, &mut self.positions);
-                coarse.set_positions(&self.positions);
-            } else {
-                coarse.set_positions(positions);
-            }
+        self.positions.clear();
+        // (positions of another length are refused: the coarse level then
+        // keeps translations alone)
+        if self.coarse.is_some() && positions.len() == self.numbering.order().len() {
+            self.positions.resize(positions.len(), [0.0; 3]);
+            self.numbering.to_new(positions, &mut self.positions);
         }
     }
 
@@ -1061,6 +1128,69 @@ mod tests {
         let forgotten = solve(&mut cg, &b3);
         println!("soft bar: {first:?}, then {with_history} iterations with the history, {fresh} without, {forgotten} after a new analysis");
         assert!(with_history == 0 && fresh > 10 && forgotten == fresh, "{with_history}, {fresh}, {forgotten}");
+    }
+
+    /// The coarse level is made again after [`COARSE_REFRESH`] solves, when
+    /// a solve takes more than half again the iterations of the first
+    /// after it, after a failed solve and after an analysis.
+    #[test]
+    fn the_coarse_level_is_made_again_when_old_or_outgrown() {
+        let mut age = CoarseAge::default();
+        assert!(age.due(), "a new analysis");
+        age.refreshed();
+        for _ in 0..COARSE_REFRESH - 1 {
+            age.solved(Some(20));
+            assert!(!age.due(), "{age:?}");
+        }
+        age.solved(Some(20));
+        assert!(age.due(), "served {COARSE_REFRESH} solves");
+        age.refreshed();
+        age.solved(Some(10));
+        age.solved(Some(17));
+        assert!(!age.due(), "17 against 10: {age:?}");
+        age.solved(Some(18));
+        assert!(age.due(), "18 against 10: {age:?}");
+        age.refreshed();
+        age.solved(None);
+        assert!(age.due(), "a failed solve");
+    }
+
+    /// A lagged coarse level made for one matrix still preconditions the
+    /// next, which differs from it by far more than a step's change: the
+    /// solve meets its tolerance (checked apart from the solver), and the
+    /// iterations it took make the level due again.
+    #[test]
+    fn a_lagged_coarse_level_still_solves_the_new_matrix() {
+        let (pattern, soft) = soft_bar(24, 4, 1e-3);
+        let (_, stiff) = soft_bar(24, 4, 1.0);
+        let n = pattern.nrows();
+        let b: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut cg = ConjugateGradient::new(1e-8, 5000);
+        cg.analyze(pattern.as_ref()).unwrap();
+        let solve = |cg: &mut ConjugateGradient, values: &[f64]| {
+            let matrix = SparseColMatRef::new(pattern.as_ref(), values);
+            cg.factor(matrix).unwrap();
+            let mut x = vec![0.0; n];
+            let stats = cg.solve(matrix, &b, &mut x).unwrap();
+            assert!(residual(&pattern, values, &b, &x) <= 1e-8);
+            stats.iterations
+        };
+        let first = solve(&mut cg, &stiff);
+        let lagged = solve(&mut cg, &soft);
+        assert_eq!(cg.coarse_age.solves, Some(2), "the level made for the stiff bar served the soft one");
+        let fresh = solve(&mut ConjugateGradient::new(1e-8, 5000).analysed(&pattern), &soft);
+        println!(
+            "stiff bar {first} iterations, soft bar {lagged} with the stiff bar's coarse level, {fresh} with its own"
+        );
+        assert!(lagged > fresh && cg.coarse_age.due(), "{first}, {lagged}, {fresh}");
+    }
+
+    impl ConjugateGradient {
+        /// The solver analysed for `pattern`.
+        fn analysed(mut self, pattern: &SymbolicSparseColMat<usize>) -> Self {
+            self.analyze(pattern.as_ref()).unwrap();
+            self
+        }
     }
 
     /// The iterations a new solver (with its coarse level or without) takes
