@@ -205,17 +205,25 @@ impl SolutionHistory {
         let chunks = r.len().div_ceil(CHUNK);
         self.partial[..chunks * width].par_chunks_mut(width).enumerate().for_each(|(c, sums)| {
             let range = c * CHUNK..(c * CHUNK + CHUNK).min(r.len());
-            let rows = |a| unknowns(a, range.clone());
-            let lanes = |a: usize, b: usize| rows(corrections).zip(rows(products)).map(|(v, a_v)| v[a] * a_v[b]).sum();
+            // every v_i · (A v_j) and v_i · r of the chunk in one pass over
+            // its rows (the sums of all slot pairs, in row order)
+            let (mut gram, mut projected) = ([0.0f64; MOST_KEPT * MOST_KEPT], [0.0f64; MOST_KEPT]);
+            let rows = unknowns(corrections, range.clone()).zip(unknowns(products, range.clone()));
+            for ((v, a_v), r) in rows.zip(&r[range.clone()]) {
+                for (i, gram) in gram.chunks_exact_mut(MOST_KEPT).enumerate() {
+                    gram.iter_mut().zip(a_v).for_each(|(g, a_v)| *g += v[i] * a_v);
+                    projected[i] += v[i] * r;
+                }
+            }
             let mut at = 0;
             for (k, &i) in order.iter().enumerate() {
                 for &j in &order[..=k] {
-                    sums[at] = lanes(i, j);
+                    sums[at] = gram[MOST_KEPT * i + j];
                     at += 1;
                 }
             }
             for (k, &i) in order.iter().enumerate() {
-                sums[at + k] = rows(corrections).zip(&r[range.clone()]).map(|(v, r)| v[i] * r).sum();
+                sums[at + k] = projected[i];
             }
         });
         let mut total = [0.0f64; sums_len(MOST_KEPT)];
