@@ -66,9 +66,6 @@ pub struct ConjugateGradient {
     /// the blocks (see [`ConjugateGradient::analyze_blocks`]), in which
     /// every vector and value of the iteration lives.
     numbering: Renumbering,
-    /// Value index (in the solver's layout) of entry `(3j + r, 3j + c)`
-    /// at `[j][3r + c]`.
-    diagonal_blocks: Vec<[usize; 9]>,
     /// Inverted diagonal blocks of the current matrix, each symmetric and
     /// stored as its upper triangle `[m00, m01, m02, m11, m12, m22]`.
     inverse_blocks: Vec<[f64; 6]>,
@@ -310,7 +307,6 @@ impl ConjugateGradient {
             tolerance,
             max_iterations,
             numbering: Renumbering::default(),
-            diagonal_blocks: Vec::new(),
             inverse_blocks: Vec::new(),
             given: BlockStructure::default(),
             values32: Vec::new(),
@@ -788,24 +784,10 @@ impl LinearSolver for ConjugateGradient {
         self.numbering.renew(blocks);
         self.history.resize(n);
         self.given.clone_from(blocks);
-        // the diagonal block's nine slots (in the caller's layout, where the
-        // f64 values are) from its position among the block rows, for every
-        // block of the solver's numbering (one search per block; the first
-        // block without one is named in the caller's numbering)
-        let (given, order) = (&self.given, self.numbering.order());
-        let slot = |j: usize| -> Option<[usize; 9]> {
-            let old = order[j] as usize;
-            let rows = given.column_rows(old);
-            let p = rows.binary_search(&(old as u32)).ok()?;
-            let stride = 3 * rows.len();
-            Some(std::array::from_fn(|k| given.start[old] + (k % 3) * stride + 3 * p + k / 3))
-        };
-        if let Some(j) = (0..n / 3).into_par_iter().find_first(|&j| slot(j).is_none()) {
-            let block = self.numbering.order()[j];
+        // (named in the caller's numbering)
+        if let Some(block) = self.numbering.missing_diagonal() {
             return Err(SolveError::Analysis(format!("block {block} has no diagonal")));
         }
-        self.diagonal_blocks.clear();
-        self.diagonal_blocks.par_extend((0..n / 3).into_par_iter().map(|j| slot(j).expect("checked above")));
         let blocks = self.numbering.blocks();
         self.inverse_blocks.resize(n / 3, [0.0; 6]);
         // (the rotated rest-state factor replaces block Jacobi and its
@@ -838,18 +820,18 @@ impl LinearSolver for ConjugateGradient {
             return Err(SolveError::NotReady);
         }
         // one parallel pass carries the values into the solver's layout
-        // rounded to f32 and checks them: a finite value beyond f32's range
-        // rounds to infinity, and then the iteration takes the f64 values
-        // throughout, carried as well
-        let (finite, rounded) = self.numbering.round_values(val, &mut self.values32);
+        // rounded to f32, inverts the diagonal blocks (block Jacobi, from
+        // the f64 values) and checks the values: a finite value beyond
+        // f32's range rounds to infinity, and then the iteration takes the
+        // f64 values throughout, carried as well
+        let (finite, rounded) = self.numbering.round_values(val, &mut self.values32, &mut self.inverse_blocks, |b| {
+            let m = invert3(b);
+            [m[0], m[1], m[2], m[4], m[5], m[8]]
+        });
         if !finite {
             return Err(SolveError::NonFinite);
         }
         (self.rounded, self.carried) = (rounded, false);
-        self.inverse_blocks.par_iter_mut().zip(&self.diagonal_blocks).for_each(|(inv, slots)| {
-            let m = invert3(slots.map(|s| val[s]));
-            *inv = [m[0], m[1], m[2], m[4], m[5], m[8]];
-        });
         if !rounded {
             self.carry_exact(val);
         }

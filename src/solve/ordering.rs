@@ -113,6 +113,9 @@ pub(super) struct Renumbering {
     source: Vec<u32>,
     /// The renumbered structure.
     blocks: BlockStructure,
+    /// Per new block column, the place of its diagonal block among its
+    /// rows (`u32::MAX`: none).
+    diagonal: Vec<u32>,
 }
 
 impl Renumbering {
@@ -154,7 +157,14 @@ impl Renumbering {
                 at += column.len();
             }
         };
-        in_column_tasks(&blocks.ptr, 0..n, 1, &mut blocks.rows, &mut self.source, 1, &sort, |(), ()| ());
+        in_column_tasks(&blocks.ptr, 0..n, (1, 0), &mut blocks.rows, (1, 0), &mut self.source, &sort, |(), ()| ());
+        // the place of every new column's diagonal block among its rows
+        let (rows, ptr) = (&blocks.rows, &blocks.ptr);
+        self.diagonal.clear();
+        self.diagonal.par_extend((0..n).into_par_iter().map(|j| {
+            let column = &rows[ptr[j] as usize..ptr[j + 1] as usize];
+            column.binary_search(&(j as u32)).map_or(u32::MAX, |p| p as u32)
+        }));
     }
 
     /// The renumbered structure.
@@ -173,40 +183,82 @@ impl Renumbering {
     }
 
     /// Writes the values `old` (laid out on the old structure) in the new
-    /// layout rounded to `f32` into `rounded`; returns whether every value
-    /// is finite and whether every rounded one is (a finite value beyond
-    /// `f32`'s range rounds to infinity).
-    pub fn round_values(&self, old: &[f64], rounded: &mut [f32]) -> (bool, bool) {
+    /// layout rounded to `f32` into `rounded`, and `diagonal(block)` of
+    /// every diagonal block (row-major, from the `f64` values) into
+    /// `diagonals`, in the new numbering; returns whether every value is
+    /// finite and whether every rounded one is (a finite value beyond
+    /// `f32`'s range rounds to infinity). Every block column must hold its
+    /// diagonal block ([`Renumbering::missing_diagonal`]).
+    pub fn round_values<D: Send>(
+        &self,
+        old: &[f64],
+        rounded: &mut [f32],
+        diagonals: &mut [D],
+        diagonal: impl Fn([f64; 9]) -> D + Sync,
+    ) -> (bool, bool) {
+        let in_range = self.carry(
+            old,
+            rounded,
+            |v| v as f32,
+            diagonals,
+            |j, column, out| {
+                let (stride, q) = (
+                    column.len() / 3,
+                    3 * self.source[self.blocks.ptr[j] as usize + self.diagonal[j] as usize] as usize,
+                );
+                let block = std::array::from_fn(|e| column[(e % 3) * stride + q + e / 3]);
+                (diagonal(block), out.iter().all(|v| v.is_finite()))
+            },
+        );
         // (every rounded value finite: then so is every value; else the
         // values themselves are looked at)
-        let in_range = self.carry(old, rounded, |v| v as f32, |out| out.iter().all(|v| v.is_finite()));
         (in_range || old.par_iter().all(|v| v.is_finite()), in_range)
     }
 
     /// Writes the values `old` (laid out on the old structure) in the new
     /// layout into `out`.
     pub fn carry_exact(&self, old: &[f64], out: &mut [f64]) {
-        self.carry(old, out, |v| v, |_| true);
+        self.carry(old, out, |v| v, &mut [], |_, _, _| ((), true));
+    }
+
+    /// The old number of the first block whose column has no diagonal
+    /// block, if any.
+    pub fn missing_diagonal(&self) -> Option<u32> {
+        let missing = self.diagonal.iter().position(|&p| p == u32::MAX)?;
+        Some(self.order[missing])
     }
 
     /// Writes `convert(v)` for every value `v` of `old` (laid out on the
-    /// old structure) into `out` in the new layout; returns whether `check`
-    /// held for every written column.
-    fn carry<T: Copy + Send>(
+    /// old structure) into `out` in the new layout, and `column_done(j,
+    /// old column j, its new values)` of every new block column `j` into
+    /// `done` (one per column, or none at all); returns whether the
+    /// check it returns held for every column.
+    fn carry<T: Copy + Send, D: Send>(
         &self,
         old: &[f64],
         out: &mut [T],
         convert: impl Fn(f64) -> T + Sync,
-        check: impl Fn(&[T]) -> bool + Sync,
+        done: &mut [D],
+        column_done: impl Fn(usize, &[f64], &[T]) -> (D, bool) + Sync,
     ) -> bool {
         let blocks = &self.blocks;
         let n = blocks.len();
-        let carry = |columns: Range<usize>, out: &mut [T], _: &mut [()]| {
-            let (mut at, mut checked) = (0, true);
-            for j in columns {
+        let per_column = usize::from(!done.is_empty());
+        let old_column = |j: usize| {
+            let stride = 3 * (blocks.ptr[j + 1] - blocks.ptr[j]) as usize;
+            &old[self.old_start[j]..self.old_start[j] + 3 * stride]
+        };
+        let carry = |columns: Range<usize>, out: &mut [T], done: &mut [D]| {
+            let (mut at, mut checked, first) = (0, true, columns.start);
+            for j in columns.clone() {
+                // (the old columns lie all over the values: the next one's
+                // lines are asked for while this one is carried)
+                if j + 1 < columns.end {
+                    old_column(j + 1).iter().step_by(8).for_each(crate::assembly::prefetch);
+                }
                 let source = &self.source[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
                 let stride = 3 * source.len();
-                let column = &old[self.old_start[j]..self.old_start[j] + 3 * stride];
+                let column = old_column(j);
                 let out = &mut out[at..at + 3 * stride];
                 for (column, out) in column.chunks_exact(stride).zip(out.chunks_exact_mut(stride)) {
                     for (to, &q) in out.chunks_exact_mut(3).zip(source) {
@@ -215,12 +267,16 @@ impl Renumbering {
                         (to[0], to[1], to[2]) = (convert(from[0]), convert(from[1]), convert(from[2]));
                     }
                 }
-                checked &= check(out);
+                let (d, check) = column_done(j, column, out);
+                if per_column == 1 {
+                    done[j - first] = d;
+                }
+                checked &= check;
                 at += 3 * stride;
             }
             checked
         };
-        in_column_tasks(&blocks.ptr, 0..n, 9, out, &mut [], 0, &carry, |a, b| a && b)
+        in_column_tasks(&blocks.ptr, 0..n, (9, 0), out, (0, per_column), done, &carry, |a, b| a && b)
     }
 
     /// `new[b] = old[order[b]]`: a vector of the old numbering in the new.
@@ -236,17 +292,18 @@ impl Renumbering {
 
 /// Runs `task` on ranges of at most [`TASK_COLUMNS`] block columns of
 /// `columns` in parallel, each with its parts of `a` and `b` (two arrays
-/// laid out along the columns, `per_block` entries per block, the columns'
-/// block offsets `ptr`), halving the range (without allocating); combines
-/// the tasks' results in column order.
+/// laid out along the columns: `(per block, per column)` entries as
+/// `a_layout` and `b_layout` say, the columns' block offsets `ptr`),
+/// halving the range (without allocating); combines the tasks' results in
+/// column order.
 #[allow(clippy::too_many_arguments)]
 fn in_column_tasks<A: Send, B: Send, R: Send>(
     ptr: &[u32],
     columns: Range<usize>,
-    per_block: usize,
+    a_layout: (usize, usize),
     a: &mut [A],
+    b_layout: (usize, usize),
     b: &mut [B],
-    per_block_b: usize,
     task: &(impl Fn(Range<usize>, &mut [A], &mut [B]) -> R + Sync),
     combine: fn(R, R) -> R,
 ) -> R {
@@ -254,11 +311,12 @@ fn in_column_tasks<A: Send, B: Send, R: Send>(
         return task(columns, a, b);
     }
     let mid = columns.start + columns.len() / 2;
-    let blocks = (ptr[mid] - ptr[columns.start]) as usize;
-    let ((a0, a1), (b0, b1)) = (a.split_at_mut(per_block * blocks), b.split_at_mut(per_block_b * blocks));
+    let (blocks, count) = ((ptr[mid] - ptr[columns.start]) as usize, mid - columns.start);
+    let split = |(per_block, per_column): (usize, usize)| per_block * blocks + per_column * count;
+    let ((a0, a1), (b0, b1)) = (a.split_at_mut(split(a_layout)), b.split_at_mut(split(b_layout)));
     let (left, right) = rayon::join(
-        || in_column_tasks(ptr, columns.start..mid, per_block, a0, b0, per_block_b, task, combine),
-        || in_column_tasks(ptr, mid..columns.end, per_block, a1, b1, per_block_b, task, combine),
+        || in_column_tasks(ptr, columns.start..mid, a_layout, a0, b_layout, b0, task, combine),
+        || in_column_tasks(ptr, mid..columns.end, a_layout, a1, b_layout, b1, task, combine),
     );
     combine(left, right)
 }
@@ -345,7 +403,8 @@ mod tests {
         let mut renumbering = Renumbering::default();
         renumbering.renew(&old);
         let (mut out, mut rounded) = (vec![0.0; values.len()], vec![0.0f32; values.len()]);
-        assert_eq!(renumbering.round_values(&values, &mut rounded), (true, true));
+        let mut diagonals = vec![[0.0; 9]; old.len()];
+        assert_eq!(renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b), (true, true));
         renumbering.carry_exact(&values, &mut out);
         let (new, order) = (renumbering.blocks(), renumbering.order());
         for j in 0..new.len() {
@@ -359,6 +418,10 @@ mod tests {
                     assert_eq!(rounded[at], out[at] as f32);
                 }
             }
+            // the diagonal block row by row: entry (r, c) is e = 3c + r above
+            let o = order[j] as usize;
+            let want: [f64; 9] = std::array::from_fn(|rc| entry(o, o, 3 * (rc % 3) + rc / 3));
+            assert_eq!(diagonals[j], want, "diagonal block of new column {j}");
         }
         let v: Vec<[f64; 3]> = (0..old.len()).map(|i| [i as f64, 0.5, -(i as f64)]).collect();
         let (mut there, mut back) = (vec![[0.0; 3]; v.len()], vec![[0.0; 3]; v.len()]);
@@ -367,9 +430,9 @@ mod tests {
         assert_eq!(back, v);
         assert_eq!(there[0], v[order[0] as usize]);
         values[17] = 1e39;
-        assert_eq!(renumbering.round_values(&values, &mut rounded), (true, false));
+        assert_eq!(renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b), (true, false));
         values[17] = f64::NAN;
-        assert!(!renumbering.round_values(&values, &mut rounded).0);
+        assert!(!renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b).0);
     }
 
     #[test]
