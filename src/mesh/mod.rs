@@ -13,6 +13,7 @@
 mod adjacency;
 mod geometry;
 mod lists;
+mod order;
 mod repair;
 mod triangulate;
 mod validate;
@@ -20,6 +21,7 @@ mod validate;
 pub use adjacency::Adjacency;
 pub use geometry::{face_geometry, fold_depth, loop_geometry, FaceGeometry, Loops, Plane};
 pub use lists::Lists;
+pub use order::Renumbered;
 pub use triangulate::triangulate_loop;
 pub use validate::{MeshError, ValidationOptions};
 
@@ -88,7 +90,7 @@ pub struct FaceRef {
 }
 
 /// A polyhedral element: its faces and (derived) its sorted node ids.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Element {
     /// The faces bounding this element.
     pub faces: Vec<FaceRef>,
