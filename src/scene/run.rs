@@ -32,8 +32,9 @@ pub struct RunOptions {
 }
 
 impl LoadedScene {
-    /// Builds the scene's mesh (read or generated), with its slivers merged
-    /// away when `mesh.merge_slivers` asks for it.
+    /// Builds the scene's mesh (read or generated; a volume mesh read from
+    /// a file renumbered for locality), with its slivers merged away when
+    /// `mesh.merge_slivers` asks for it.
     pub fn build_mesh(&self) -> Result<PolyMesh, SceneError> {
         let mut mesh = self.read_or_generate_mesh()?;
         if let Some(q) = self.scene.mesh.merge_slivers {
@@ -52,7 +53,12 @@ impl LoadedScene {
         if let Some(file) = &m.file {
             let path = self.resolve(file);
             return match &self.scene.meshing {
-                None => read_mesh(&path).map_err(|e| self.engine(e)),
+                // (a file's numbering is whatever made the file: renumbered
+                // for locality, see PolyMesh::renumber_for_locality)
+                None => read_mesh(&path).map_err(|e| self.engine(e)).map(|mut mesh| {
+                    mesh.renumber_for_locality();
+                    mesh
+                }),
                 Some(me) => {
                     let raw = read_surface(&path).map_err(|e| self.engine(e))?;
                     let (surface, _) = prepare(&raw).map_err(|e| self.engine(e))?;
