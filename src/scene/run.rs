@@ -40,6 +40,11 @@ impl LoadedScene {
         if let Some(q) = self.scene.mesh.merge_slivers {
             merge_slivers(&mut mesh, q).map_err(|e| self.engine(e))?;
         }
+        // (a file's numbering is whatever made the file; the generators and
+        // the meshing number cell by cell already)
+        if self.scene.mesh.file.is_some() && self.scene.meshing.is_none() {
+            mesh.renumber_for_locality();
+        }
         Ok(mesh)
     }
 
@@ -53,12 +58,7 @@ impl LoadedScene {
         if let Some(file) = &m.file {
             let path = self.resolve(file);
             return match &self.scene.meshing {
-                // (a file's numbering is whatever made the file: renumbered
-                // for locality, see PolyMesh::renumber_for_locality)
-                None => read_mesh(&path).map_err(|e| self.engine(e)).map(|mut mesh| {
-                    mesh.renumber_for_locality();
-                    mesh
-                }),
+                None => read_mesh(&path).map_err(|e| self.engine(e)),
                 Some(me) => {
                     let raw = read_surface(&path).map_err(|e| self.engine(e))?;
                     let (surface, _) = prepare(&raw).map_err(|e| self.engine(e))?;
