@@ -105,6 +105,34 @@ const TASK_COLUMNS: usize = 256;
 /// in that order's own.)
 const KEPT_ENVELOPE: f64 = 1.25;
 
+/// The order `order` of the first `before` blocks of `old` extended to all
+/// of them: each later block right after the first of its neighbours below
+/// `before` in `order` (the later blocks there by number), a later block
+/// with no such neighbour at the end.
+fn extended_order(order: &[u32], old: &BlockStructure, before: usize) -> Vec<u32> {
+    let mut place = vec![0u32; before];
+    order.iter().enumerate().for_each(|(p, &o)| place[o as usize] = p as u32);
+    // (the place after which each later block goes, `before` for the end)
+    let mut later: Vec<(u32, u32)> = (before..old.len())
+        .map(|b| {
+            let first = old.column_rows(b).iter().filter(|&&r| (r as usize) < before).map(|&r| place[r as usize]).min();
+            (first.unwrap_or(before as u32), b as u32)
+        })
+        .collect();
+    later.sort_unstable();
+    let mut extended = Vec::with_capacity(old.len());
+    let mut next = later.iter().peekable();
+    for (p, &o) in order.iter().enumerate() {
+        extended.push(o);
+        while let Some(&&(_, b)) = next.peek().filter(|(after, _)| *after as usize == p) {
+            extended.push(b);
+            next.next();
+        }
+    }
+    extended.extend(next.map(|&(_, b)| b));
+    extended
+}
+
 /// The envelope of a symmetric structure under a numbering: `Σ_j (j -
 /// min_i i)` over every column `j` and its rows `i` (`rows(j)` in the
 /// numbering, `at(j)` the column's own number there), the entries a
@@ -133,28 +161,47 @@ pub(super) struct Renumbering {
     /// Per new block column, the place of its diagonal block among its
     /// rows (`u32::MAX`: none).
     diagonal: Vec<u32>,
+    /// The envelope per stored block of the order the last whole analysis
+    /// chose, which an extended order may exceed [`KEPT_ENVELOPE`] times.
+    reference: f64,
 }
 
 impl Renumbering {
-    /// Renumbers `old` (reusing this renumbering's arrays): in its reverse
-    /// Cuthill–McKee order, or as it is when its own order's envelope is
-    /// at most [`KEPT_ENVELOPE`] times that one's (a mesh renumbered for
-    /// locality: carrying values and vectors is then streaming them).
+    /// Renumbers `old` (reusing this renumbering's arrays). A structure
+    /// that extends the last one renumbered (its blocks first, new ones
+    /// after them, as a cut appends its nodes) keeps the last order, each
+    /// new block placed after the first of its old neighbours in it, while
+    /// that order's envelope per stored block stays within
+    /// [`KEPT_ENVELOPE`] times the last whole analysis's (the cut then
+    /// costs no search over the whole graph). Otherwise the whole analysis:
+    /// the reverse Cuthill–McKee order, or the structure's own when its
+    /// envelope is at most [`KEPT_ENVELOPE`] times that one's (a mesh
+    /// renumbered for locality: carrying values and vectors is then
+    /// streaming them).
     pub fn renew(&mut self, old: &BlockStructure) {
         let n = old.len();
-        self.order = reverse_cuthill_mckee(n, |v| old.column_rows(v).iter().map(|&r| r as usize));
-        self.rank.resize(n, 0);
-        for (new, &o) in self.order.iter().enumerate() {
-            self.rank[o as usize] = new as u32;
-        }
-        let rank = &self.rank;
-        let reordered =
-            envelope(n, |j| old.column_rows(j).iter().map(|&r| rank[r as usize] as usize), |j| rank[j] as usize);
-        let own = envelope(n, |j| old.column_rows(j).iter().map(|&r| r as usize), |j| j);
-        if own as f64 <= KEPT_ENVELOPE * reordered as f64 {
-            self.order.clear();
-            self.order.extend(0..n as u32);
-            self.rank.clone_from(&self.order);
+        let before = self.order.len();
+        let per_block = |envelope: usize| envelope as f64 / old.rows_len().max(1) as f64;
+        let extended = (0 < before && before <= n).then(|| extended_order(&self.order, old, before)).filter(|order| {
+            self.rank_by(order);
+            per_block(self.envelope_of(old)) <= KEPT_ENVELOPE * self.reference
+        });
+        match extended {
+            Some(order) => self.order = order,
+            None => {
+                let order = reverse_cuthill_mckee(n, |v| old.column_rows(v).iter().map(|&r| r as usize));
+                self.rank_by(&order);
+                self.order = order;
+                let reordered = self.envelope_of(old);
+                let own = envelope(n, |j| old.column_rows(j).iter().map(|&r| r as usize), |j| j);
+                self.reference = per_block(reordered);
+                if own as f64 <= KEPT_ENVELOPE * reordered as f64 {
+                    self.order.clear();
+                    self.order.extend(0..n as u32);
+                    self.rank.clone_from(&self.order);
+                    self.reference = per_block(own);
+                }
+            }
         }
         self.old_start.clear();
         self.old_start.extend(self.order.iter().map(|&o| old.start[o as usize]));
@@ -194,6 +241,20 @@ impl Renumbering {
             let column = &rows[ptr[j] as usize..ptr[j + 1] as usize];
             column.binary_search(&(j as u32)).map_or(u32::MAX, |p| p as u32)
         }));
+    }
+
+    /// Sets `rank` to the inverse of `order`.
+    fn rank_by(&mut self, order: &[u32]) {
+        self.rank.resize(order.len(), 0);
+        for (new, &o) in order.iter().enumerate() {
+            self.rank[o as usize] = new as u32;
+        }
+    }
+
+    /// The envelope of `old` in the numbering `rank`.
+    fn envelope_of(&self, old: &BlockStructure) -> usize {
+        let rank = &self.rank;
+        envelope(old.len(), |j| old.column_rows(j).iter().map(|&r| rank[r as usize] as usize), |j| rank[j] as usize)
     }
 
     /// The renumbered structure.
@@ -357,6 +418,11 @@ mod tests {
     /// The blocks of an `m x m x m` grid coupled to their six neighbours
     /// (and themselves), numbered in a shuffled order, as a block structure.
     fn shuffled_grid(m: usize) -> BlockStructure {
+        structure(shuffled_grid_columns(m))
+    }
+
+    /// The block rows of every column of [`shuffled_grid`].
+    fn shuffled_grid_columns(m: usize) -> Vec<Vec<u32>> {
         let n = m * m * m;
         // a permutation of 0..n by a multiplier coprime to n
         let shuffle = |v: usize| (v * 7919) % n;
@@ -374,6 +440,11 @@ mod tests {
                 }
             }
         }
+        columns
+    }
+
+    /// The block structure of the columns' block rows (any order).
+    fn structure(columns: Vec<Vec<u32>>) -> BlockStructure {
         let (mut ptr, mut rows, mut start) = (vec![0u32], Vec::new(), Vec::new());
         for mut column in columns {
             column.sort_unstable();
@@ -428,6 +499,51 @@ mod tests {
         let mut out = vec![0.0; values.len()];
         again.carry_exact(&values, &mut out);
         assert_eq!(out, values);
+    }
+
+    /// Blocks appended to a renumbered structure (as a cut appends nodes)
+    /// go right after the first of their old neighbours in the last order,
+    /// the old blocks keep it, a block with no old neighbour goes last;
+    /// appended blocks that couple the order's two ends make the envelope
+    /// too wide, and the whole analysis runs again.
+    #[test]
+    fn appended_blocks_extend_the_last_order_while_it_stays_local() {
+        let mut columns = shuffled_grid_columns(6);
+        let n = columns.len();
+        let mut renumbering = Renumbering::default();
+        renumbering.renew(&structure(columns.clone()));
+        let first = renumbering.order().to_vec();
+        let place = |b: u32| first.iter().position(|&o| o == b).unwrap();
+        let couple = |columns: &mut Vec<Vec<u32>>, a: usize, b: usize| {
+            columns[a].push(b as u32);
+            columns[b].push(a as u32);
+        };
+        // a: between two grid neighbours; b: to a and one old block; c: alone
+        let (u, v, w) = (first[40] as usize, first[41] as usize, first[100] as usize);
+        columns.extend([vec![n as u32], vec![n as u32 + 1], vec![n as u32 + 2]]);
+        let (a, b, c) = (n, n + 1, n + 2);
+        couple(&mut columns, a, u);
+        couple(&mut columns, a, v);
+        couple(&mut columns, b, a);
+        couple(&mut columns, b, w);
+        renumbering.renew(&structure(columns.clone()));
+        let mut want = first.clone();
+        want.insert(place(w as u32) + 1, b as u32);
+        want.insert(place(u as u32).min(place(v as u32)) + 1, a as u32);
+        want.push(c as u32);
+        assert_eq!(renumbering.order(), &want[..]);
+        // many blocks coupling the two ends of the order
+        let (head, tail) = (first[0] as usize, first[n - 1] as usize);
+        for _ in 0..n / 2 {
+            columns.push(vec![columns.len() as u32]);
+            let added = columns.len() - 1;
+            couple(&mut columns, added, head);
+            couple(&mut columns, added, tail);
+        }
+        renumbering.renew(&structure(columns));
+        let old_places: Vec<usize> =
+            want.iter().map(|&b| renumbering.order().iter().position(|&o| o == b).unwrap()).collect();
+        assert!(old_places.windows(2).any(|w| w[0] > w[1]), "the whole analysis reorders the old blocks");
     }
 
     /// The carried values are the renumbered matrix `Q A Qᵀ`, entry by
