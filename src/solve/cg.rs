@@ -56,7 +56,9 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 /// iterations at 1e-6 and 140 at 1e-8 from that start, 58 and 107 from
 /// the span of the last 8 corrections (`history.rs`); with the 687
 /// aggregates' block Jacobi added, 43 and 80 (2 cores, AMD EPYC: solve 53
-/// against 62 ms at 1e-6, 84 against 100 ms at 1e-8).
+/// against 62 ms at 1e-6, 84 against 100 ms at 1e-8). The coarse level is
+/// assembled and factored again every 4 solves, or within a solve that
+/// outgrows it (`COARSE_REFRESH`, `CoarseAge`).
 pub struct ConjugateGradient {
     /// Relative residual `|b - A x| / |b|` to reach.
     pub tolerance: f64,
@@ -935,8 +937,9 @@ impl LinearSolver for ConjugateGradient {
     }
 
     /// The positions are kept for the next refresh of the coarse level
-    /// (see [`CoarseAge`]): a lagged level keeps the rigid motions it was
-    /// made with, so that its factor stays the one of its own `Pᵀ A P`.
+    /// (made again every few solves, see the solver's docs): a lagged level
+    /// keeps the rigid motions it was made with, so that its factor stays
+    /// the one of its own `Pᵀ A P`.
     fn set_positions(&mut self, positions: &[[f64; 3]]) {
         self.positions.clear();
         // (positions of another length are refused: the coarse level then
