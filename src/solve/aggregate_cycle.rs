@@ -42,6 +42,10 @@ use rayon::prelude::*;
 /// zero; with it every factor exists and such a mode corrects nothing.
 pub(super) const ROTATION_FLOOR: f64 = 1e-12;
 
+/// Groups of a component from which its block of `A₂` is assembled with
+/// its columns in parallel.
+const PARALLEL_GROUPS: usize = 16;
+
 /// `A₁`: symmetric, both triangles stored, `k x k` blocks. Block column
 /// `b` holds the blocks of rows `rows[ptr[b]..ptr[b + 1]]` (ascending),
 /// block `p` at `values[k² p..k² (p + 1)]` with entry `(r, c)` at `c k + r`.
@@ -91,12 +95,21 @@ pub(super) struct AggregateCycle {
     members: Vec<u32>,
     /// Every aggregate's centroid from its group's (m), with rotations.
     offsets: Vec<[f64; 3]>,
+    /// The groups of connected component `c` (of the groups' graph, which
+    /// couples two groups where `A₁` couples aggregates of theirs) at
+    /// `component_ptr[c]..component_ptr[c + 1]`: the groups are numbered
+    /// component by component, so that `A₂` is block diagonal, one dense
+    /// block per component. A body cut into pieces has a component per
+    /// piece, and no piece's modes meet another's in the factor.
+    component_ptr: Vec<u32>,
     /// Whether every aggregate is its own group: the cycle is then the
     /// exact solve of `A₁`.
     exact: bool,
     /// The inverses of the diagonal blocks of `A₁` (`k x k`, column-major).
     inverse: Vec<f64>,
-    /// `A₂ = Tᵀ A₁ T`, dense, overwritten by its lower Cholesky factor.
+    /// The diagonal blocks of `A₂ = Tᵀ A₁ T`, one per component, each
+    /// dense (column-major) and overwritten by its lower Cholesky factor,
+    /// laid end to end.
     factor: Vec<f64>,
     stack: Option<MemBuffer>,
     /// Work vector of the modes of `A₂`.
@@ -105,19 +118,42 @@ pub(super) struct AggregateCycle {
 
 impl AggregateCycle {
     /// The cycle for `aggregates` aggregates grouped by `of` (`groups`
-    /// groups; `None`: each its own, the exact solve), in the memory of
-    /// `old`.
-    pub fn renew(aggregates: usize, grouping: Option<(Vec<u32>, usize)>, old: Self) -> Self {
+    /// groups; `None`: each its own, the exact solve), neighbours in
+    /// `graph` (offsets, neighbours: the pattern of `A₁`), in the memory of
+    /// `old`. The groups are numbered again, component by component.
+    pub fn renew(aggregates: usize, grouping: Option<(Vec<u32>, usize)>, graph: (&[u32], &[u32]), old: Self) -> Self {
         let exact = grouping.is_none();
-        let (of, groups) = grouping.unwrap_or_else(|| ((0..aggregates as u32).collect(), aggregates));
+        let (mut of, groups) = grouping.unwrap_or_else(|| ((0..aggregates as u32).collect(), aggregates));
+        let component_ptr = number_by_component(graph, &mut of, groups);
         let (ptr, members) = super::coarse::group(&of, groups);
-        AggregateCycle { of, groups, ptr, members, exact, factor: old.factor, stack: old.stack, ..Default::default() }
+        AggregateCycle {
+            of,
+            groups,
+            ptr,
+            members,
+            component_ptr,
+            exact,
+            factor: old.factor,
+            stack: old.stack,
+            ..Default::default()
+        }
+    }
+
+    /// The groups of every component, in order.
+    fn components(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.component_ptr.windows(2).map(|w| w[0] as usize..w[1] as usize)
     }
 
     /// Number of aggregates of aggregates.
     #[cfg(test)]
     pub fn groups(&self) -> usize {
         self.groups
+    }
+
+    /// Number of groups of every component, in order.
+    #[cfg(test)]
+    pub fn component_groups(&self) -> Vec<usize> {
+        self.components().map(|c| c.len()).collect()
     }
 
     /// Whether the cycle is the exact solve of `A₁`.
@@ -168,44 +204,72 @@ impl AggregateCycle {
         self.factor_groups(a1, rotations)
     }
 
-    /// `A₂ = Tᵀ A₁ T` (dense, group columns in parallel) and its Cholesky
-    /// factor.
+    /// `A₂ = Tᵀ A₁ T`, a dense block per component (the group columns of a
+    /// large one in parallel), and the Cholesky factor of each block.
     fn factor_groups(&mut self, a1: &AggregateMatrix, rotations: bool) -> Result<(), NotPositive> {
-        let (k, kk) = (a1.k, a1.k * a1.k);
-        let n = k * self.groups;
+        let k = a1.k;
+        let order = |groups: &std::ops::Range<usize>| k * groups.len();
+        let total: usize = self.components().map(|c| order(&c).pow(2)).sum();
+        let largest = self.components().map(|c| order(&c)).max().unwrap_or(0);
         let mut dense = std::mem::take(&mut self.factor);
-        dense.resize(n * n, 0.0);
-        let this = &*self;
-        dense.par_chunks_mut(k * n).enumerate().for_each(|(g, cols)| {
-            cols.fill(0.0);
-            for &b in &this.members[this.ptr[g] as usize..this.ptr[g + 1] as usize] {
-                let b = b as usize;
-                for p in a1.ptr[b] as usize..a1.ptr[b + 1] as usize {
-                    let a = a1.rows[p] as usize;
-                    let block = &a1.values[kk * p..kk * (p + 1)];
-                    let row = k * this.of[a] as usize;
-                    add_transferred(block, this.offset(a, rotations), this.offset(b, rotations), k, |r, c, v| {
-                        cols[c * n + row + r] += v;
-                    });
-                }
-            }
-        });
-        let stack = self.stack.get_or_insert_with(|| MemBuffer::new(cholesky_scratch(n)));
-        if stack.len() < cholesky_scratch(n).size_bytes() {
-            *stack = MemBuffer::new(cholesky_scratch(n));
+        dense.resize(total, 0.0);
+        let mut stack = self.stack.take().unwrap_or_else(|| MemBuffer::new(cholesky_scratch(largest)));
+        if stack.len() < cholesky_scratch(largest).size_bytes() {
+            stack = MemBuffer::new(cholesky_scratch(largest));
         }
-        let result = llt::factor::cholesky_in_place(
-            MatMut::from_column_major_slice_mut(&mut dense, n, n),
-            Default::default(),
-            Par::Seq,
-            MemStack::new(stack),
-            Default::default(),
-        );
+        let mut result = Ok(());
+        let mut rest = &mut dense[..];
+        for groups in self.components() {
+            let n = order(&groups);
+            let (block, after) = rest.split_at_mut(n * n);
+            rest = after;
+            let column = |(g, cols): (usize, &mut [f64])| self.assemble_group(a1, rotations, &groups, g, cols);
+            if groups.len() >= PARALLEL_GROUPS {
+                block.par_chunks_mut(k * n).enumerate().for_each(column);
+            } else {
+                block.chunks_mut(k * n).enumerate().for_each(column);
+            }
+            let factored = llt::factor::cholesky_in_place(
+                MatMut::from_column_major_slice_mut(block, n, n),
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut stack),
+                Default::default(),
+            );
+            if let Err(llt::factor::LltError::NonPositivePivot { index }) = factored {
+                let group = groups.start + index / k;
+                result = Err(NotPositive { aggregate: self.members[self.ptr[group] as usize] as usize });
+                break;
+            }
+        }
         self.factor = dense;
-        match result {
-            Ok(_) => Ok(()),
-            Err(llt::factor::LltError::NonPositivePivot { index }) => {
-                Err(NotPositive { aggregate: self.members[self.ptr[index / k] as usize] as usize })
+        self.stack = Some(stack);
+        result
+    }
+
+    /// Columns `cols` (`k` columns of the block of the component of
+    /// `groups`, column-major) of `A₂` for its `g`-th group.
+    fn assemble_group(
+        &self,
+        a1: &AggregateMatrix,
+        rotations: bool,
+        groups: &std::ops::Range<usize>,
+        g: usize,
+        cols: &mut [f64],
+    ) {
+        let (k, kk) = (a1.k, a1.k * a1.k);
+        let n = k * groups.len();
+        cols.fill(0.0);
+        let g = groups.start + g;
+        for &b in &self.members[self.ptr[g] as usize..self.ptr[g + 1] as usize] {
+            let b = b as usize;
+            for p in a1.ptr[b] as usize..a1.ptr[b + 1] as usize {
+                let a = a1.rows[p] as usize;
+                let block = &a1.values[kk * p..kk * (p + 1)];
+                let row = k * (self.of[a] as usize - groups.start);
+                add_transferred(block, self.offset(a, rotations), self.offset(b, rotations), k, |r, c, v| {
+                    cols[c * n + row + r] += v;
+                });
             }
         }
     }
@@ -269,13 +333,17 @@ impl AggregateCycle {
 
     /// `v = A₂⁻¹ v` by the dense factor.
     fn solve_groups(&self, k: usize, v: &mut [f64]) {
-        let n = k * self.groups;
-        llt::solve::solve_in_place(
-            MatRef::from_column_major_slice(&self.factor, n, n),
-            MatMut::from_column_major_slice_mut(v, n, 1),
-            Par::Seq,
-            MemStack::new(&mut []),
-        );
+        let mut offset = 0;
+        for groups in self.components() {
+            let n = k * groups.len();
+            llt::solve::solve_in_place(
+                MatRef::from_column_major_slice(&self.factor[offset..offset + n * n], n, n),
+                MatMut::from_column_major_slice_mut(&mut v[k * groups.start..k * groups.end], n, 1),
+                Par::Seq,
+                MemStack::new(&mut []),
+            );
+            offset += n * n;
+        }
     }
 }
 
@@ -315,6 +383,35 @@ fn add_transferred(
         (0..3).for_each(|r| add(r, c, top[r]));
         (0..3).for_each(|r| add(3 + r, c, n[c * 6 + 3 + r] + w[r]));
     }
+}
+
+/// Renumbers the `groups` groups of `of` (aggregate to group) so that each
+/// connected component of the groups' graph (two groups neighbour where an
+/// aggregate of one neighbours an aggregate of the other in `graph`:
+/// offsets, neighbours) is a range of numbers, components in the order of
+/// their first group and groups in their order within; returns the ranges'
+/// bounds.
+fn number_by_component(graph: (&[u32], &[u32]), of: &mut [u32], groups: usize) -> Vec<u32> {
+    let (ptr, adj) = graph;
+    let of_ref = &*of;
+    let edges = (0..ptr.len().saturating_sub(1))
+        .flat_map(|a| adj[ptr[a] as usize..ptr[a + 1] as usize].iter().map(move |&b| (of_ref[a], of_ref[b as usize])));
+    let root = super::coarse::component_roots(groups, edges);
+    // a stable counting sort of the groups by their root
+    let mut start = vec![0u32; groups + 1];
+    root.iter().for_each(|&r| start[r as usize + 1] += 1);
+    (0..groups).for_each(|r| start[r + 1] += start[r]);
+    let mut fill = start.clone();
+    let number: Vec<u32> = root
+        .iter()
+        .map(|&r| {
+            fill[r as usize] += 1;
+            fill[r as usize] - 1
+        })
+        .collect();
+    of.iter_mut().for_each(|g| *g = number[*g as usize]);
+    let firsts = (0..groups).filter(|&g| root[g] == g as u32).map(|g| start[g]);
+    firsts.chain(std::iter::once(groups as u32)).collect()
 }
 
 /// Scratch of the dense Cholesky factor of order `n`.
@@ -423,13 +520,22 @@ mod tests {
     /// g + D⁻¹ g` with `A₂ = Tᵀ A₁ T`, for five aggregates on a chain in two
     /// groups, with rotations (`T` per aggregate `[I  -[d]×; 0  I]`, `d` its
     /// centroid from its group's, weighted by the member counts) and
-    /// without (`T` per aggregate `I`).
+    /// without (`T` per aggregate `I`); and for the chain cut in two pieces
+    /// (aggregates 0-1 and 2-4), with groups numbered across the pieces
+    /// (the cycle numbers them again, piece by piece, and factors a block
+    /// per piece).
     #[test]
     fn the_cycle_is_its_formula() {
-        let (m, of) = (5usize, vec![0u32, 0, 1, 1, 1]);
+        let m = 5usize;
         let centroids = [[0.0, 0.1, 0.2], [1.0, -0.3, 0.4], [2.1, 0.5, -0.2], [2.9, 0.0, 0.3], [4.2, -0.1, 0.1]];
         let (counts, member_ptr) = ([3u32, 5, 2, 4, 1], [0u32, 3, 8, 10, 14, 15]);
-        for k in [3usize, 6] {
+        let cases = [
+            (false, vec![0u32, 0, 1, 1, 1], 2, 1),
+            (true, vec![1, 1, 0, 0, 0], 2, 2),
+            (true, vec![1, 1, 0, 2, 2], 3, 2),
+        ];
+        for ((cut, of, groups, pieces), k) in cases.into_iter().flat_map(|case| [3usize, 6].map(|k| (case.clone(), k)))
+        {
             // A₁ on the chain: symmetric, diagonally dominant
             let entry = |a: usize, b: usize, r: usize, c: usize| -> f64 {
                 let (i, j) = (k * a + r, k * b + c);
@@ -440,29 +546,33 @@ mod tests {
                     off
                 }
             };
+            // neighbours on the chain, unless the cut parts them
+            let coupled = |a: usize, b: usize| a.abs_diff(b) <= 1 && !(cut && a.min(b) == 1 && a.max(b) == 2);
             let (mut ptr, mut rows, mut values) = (vec![0u32], vec![], vec![]);
             for b in 0..m {
-                for a in b.saturating_sub(1)..(b + 2).min(m) {
+                for a in (b.saturating_sub(1)..(b + 2).min(m)).filter(|&a| coupled(a, b)) {
                     rows.push(a as u32);
                     (0..k * k).for_each(|e| values.push(entry(a, b, e % k, e / k)));
                 }
                 ptr.push(rows.len() as u32);
             }
             let a1 = AggregateMatrix { k, ptr, rows, values };
-            let mut cycle = AggregateCycle::renew(m, Some((of.clone(), 2)), AggregateCycle::default());
+            let mut cycle =
+                AggregateCycle::renew(m, Some((of.clone(), groups)), (&a1.ptr, &a1.rows), AggregateCycle::default());
+            assert_eq!(cycle.component_ptr.len() - 1, pieces, "{of:?}");
             if k == 6 {
                 cycle.set_centroids(&centroids, &member_ptr);
             }
             cycle.factor(&a1).unwrap();
             let dense_a1 = faer::Mat::<f64>::from_fn(k * m, k * m, |i, j| {
                 let (a, b) = (i / k, j / k);
-                if a.abs_diff(b) <= 1 {
+                if coupled(a, b) {
                     entry(a, b, i % k, j % k)
                 } else {
                     0.0
                 }
             });
-            let t = faer::Mat::<f64>::from_fn(k * m, 2 * k, |i, j| {
+            let t = faer::Mat::<f64>::from_fn(k * m, groups * k, |i, j| {
                 let (a, r, c) = (i / k, i % k, j % k);
                 if of[a] as usize != j / k {
                     return 0.0;
@@ -495,7 +605,7 @@ mod tests {
             cycle.apply(k, &g, &mut got);
             for i in 0..k * m {
                 let w = want[(i, 0)];
-                assert!((got[i] - w).abs() <= 1e-12 * (1.0 + w.abs()), "k = {k}, entry {i}: {} against {w}", got[i]);
+                assert!((got[i] - w).abs() <= 1e-12 * (1.0 + w.abs()), "{of:?}, k = {k}, entry {i}: {} vs {w}", got[i]);
             }
         }
     }

@@ -31,8 +31,9 @@ use super::aggregate_cycle::{AggregateCycle, AggregateMatrix, ROTATION_FLOOR};
 use super::{BlockStructure, SolveError};
 
 /// The most aggregates whose system the coarse level solves exactly, and
-/// the most aggregates of aggregates the cycle solves exactly otherwise,
-/// for a matrix storing `stored` values: `m = ∛stored / 2`. Its dense
+/// the most aggregates of aggregates the cycle solves exactly otherwise
+/// (for a body in pieces, the budget `Σ m_c² ≤ m²` over the pieces'
+/// dense blocks), for a matrix storing `stored` values: `m = ∛stored / 2`. Its dense
 /// factor of six modes per aggregate then costs `(6m)³ / 3 = 9 · stored`
 /// flops once per step (a few passes over the matrix) and its triangular
 /// solves `36 m²` flops per iteration, a small fraction of the product's
@@ -116,7 +117,8 @@ impl CoarseSpace {
         let n = blocks.ptr.len() - 1;
         let limit = max_aggregates.max(1);
         // one round (none for a system the limit solves whole)
-        let round = (n > limit).then(|| aggregate(&blocks.ptr, &blocks.rows)).filter(|&(_, merged)| merged < n);
+        let round =
+            (n > limit).then(|| aggregate(&blocks.ptr, &blocks.rows, |_| true)).filter(|&(_, merged)| merged < n);
         let (of, count, graph) = match round {
             Some((of, count)) => {
                 let graph = quotient(&blocks.ptr, &blocks.rows, &of, count);
@@ -124,7 +126,7 @@ impl CoarseSpace {
             }
             None => ((0..n as u32).collect(), n, (blocks.ptr.clone(), blocks.rows.clone())),
         };
-        let grouping = (count > limit).then(|| coarsen(&graph, count, limit)).flatten();
+        let grouping = coarsen(&graph, count, limit);
         let (ptr, members) = group(&of, count);
         let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
         // the aggregates of a column's rows, each once, as the rows meet them
@@ -176,6 +178,7 @@ impl CoarseSpace {
         run_sums.resize(run_aggregate.len(), [0.0; 18]);
         let mut system = old.system;
         (system.ptr, system.rows) = (graph_ptr, graph_rows);
+        let cycle = AggregateCycle::renew(count, grouping, (&system.ptr, &system.rows), old.cycle);
         let chunk_blocks = chunk_blocks.max(1);
         let spans: Vec<(u32, u32)> = of
             .chunks(chunk_blocks)
@@ -194,7 +197,7 @@ impl CoarseSpace {
             run_slot,
             run_sums,
             system,
-            cycle: AggregateCycle::renew(count, grouping, old.cycle),
+            cycle,
             partial: old.partial,
             restricted: old.restricted,
             correction: old.correction,
@@ -505,14 +508,24 @@ fn unit(c: usize) -> [f64; 3] {
 }
 
 /// Aggregates of the `count` vertices of `graph` (offsets, neighbours),
-/// coarsened by rounds of [`aggregate`] until at most `limit` remain, and
-/// their number; `None` when the first round merges nothing.
+/// coarsened by rounds of [`aggregate`] until the dense blocks of the
+/// cycle, one per connected component ([`AggregateCycle`]: a body a cut
+/// set in pieces has a block per piece), hold at most as many values as
+/// one of `limit` aggregates would, `Σ count_c² ≤ limit²`; and their
+/// number. A round merges in every component of more than one; a piece
+/// that is one aggregate costs the cycle a `k x k` block. `None` when no
+/// round is needed or the first merges nothing.
 fn coarsen(graph: &(Vec<u32>, Vec<u32>), count: usize, limit: usize) -> Option<(Vec<u32>, usize)> {
     let mut of: Vec<u32> = (0..count as u32).collect();
     let (mut groups, mut quotient_graph) = (count, None::<(Vec<u32>, Vec<u32>)>);
-    while groups > limit {
+    loop {
         let (ptr, adj) = quotient_graph.as_ref().unwrap_or(graph);
-        let (round, merged) = aggregate(ptr, adj);
+        let size = component_sizes(ptr, adj);
+        // Σ over components of count_c² is Σ over vertices of count_c
+        if size.iter().sum::<usize>() <= limit * limit {
+            break;
+        }
+        let (round, merged) = aggregate(ptr, adj, |v| size[v] > 1);
         if merged == groups {
             break;
         }
@@ -523,16 +536,51 @@ fn coarsen(graph: &(Vec<u32>, Vec<u32>), count: usize, limit: usize) -> Option<(
     (groups < count).then_some((of, groups))
 }
 
-/// One round of greedy aggregation of the graph whose vertex `v` has the
-/// neighbours `adj[ptr[v]..ptr[v + 1]]` (itself among them or not): a
-/// vertex whose neighbours are all free founds an aggregate of itself and
-/// them, in vertex order; every vertex left then joins the aggregate of its
-/// first neighbour that has one (after the first pass, every free vertex
-/// has such a neighbour: else it would have founded one). Returns the
-/// aggregate of every vertex and their number.
-fn aggregate(ptr: &[u32], adj: &[u32]) -> (Vec<u32>, usize) {
+/// The number of vertices of every vertex's connected component in the
+/// graph (offsets, neighbours).
+fn component_sizes(ptr: &[u32], adj: &[u32]) -> Vec<usize> {
     let n = ptr.len() - 1;
-    let neighbours = |v: usize| &adj[ptr[v] as usize..ptr[v + 1] as usize];
+    let edges = (0..n).flat_map(|v| adj[ptr[v] as usize..ptr[v + 1] as usize].iter().map(move |&w| (v as u32, w)));
+    let root = component_roots(n, edges);
+    let mut size = vec![0usize; n];
+    root.iter().for_each(|&r| size[r as usize] += 1);
+    root.iter().map(|&r| size[r as usize]).collect()
+}
+
+/// The connected components of the `n` vertices joined by `edges`: every
+/// vertex's root, the first vertex of its component.
+pub(super) fn component_roots(n: usize, edges: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
+    let mut root: Vec<u32> = (0..n as u32).collect();
+    let find = |root: &mut [u32], mut v: u32| {
+        while root[v as usize] != v {
+            let up = root[root[v as usize] as usize];
+            root[v as usize] = up;
+            v = up;
+        }
+        v
+    };
+    for (v, w) in edges {
+        let (x, y) = (find(&mut root, v), find(&mut root, w));
+        root[x.max(y) as usize] = x.min(y);
+    }
+    for v in 0..n as u32 {
+        root[v as usize] = find(&mut root, v);
+    }
+    root
+}
+
+/// One round of greedy aggregation of the graph whose vertex `v` has the
+/// neighbours `adj[ptr[v]..ptr[v + 1]]` (itself among them or not), among
+/// the vertices that `merges`: a vertex whose neighbours are all free
+/// founds an aggregate of itself and them, in vertex order; every vertex
+/// left then joins the aggregate of its first neighbour that has one (after
+/// the first pass, every free vertex has such a neighbour: else it would
+/// have founded one). A vertex that does not merge (nor may any of its
+/// neighbours) is an aggregate of its own. Returns the aggregate of every
+/// vertex and their number.
+fn aggregate(ptr: &[u32], adj: &[u32], merges: impl Fn(usize) -> bool) -> (Vec<u32>, usize) {
+    let n = ptr.len() - 1;
+    let neighbours = |v: usize| if merges(v) { &adj[ptr[v] as usize..ptr[v + 1] as usize] } else { &[] };
     let mut of = vec![FREE; n];
     let mut count = 0u32;
     for v in 0..n {
@@ -674,7 +722,7 @@ mod tests {
     fn aggregates_cover_every_block_and_are_connected() {
         let (pattern, _) = grid(9, 7, 5);
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        let one_round = aggregate(&blocks.ptr, &blocks.rows).1;
+        let one_round = aggregate(&blocks.ptr, &blocks.rows, |_| true).1;
         for limit in [1000, 40, 5] {
             let coarse = CoarseSpace::new(&blocks, limit, 1024);
             let m = coarse.aggregates();
@@ -702,6 +750,34 @@ mod tests {
         }
     }
 
+    /// A body cut in pieces (a grid of 9 x 7 x 5 blocks, one of 3 x 2 x 1,
+    /// 30 lone blocks): the cycle has a block per piece, the blocks within
+    /// the budget of `limit` groups (`Σ g_c² ≤ limit²`), and the large
+    /// piece keeps more than one group (coarsening stops at the budget, not
+    /// when every piece is one group).
+    #[test]
+    fn a_body_in_pieces_has_a_block_per_piece_within_the_budget() {
+        let parts: Vec<(usize, usize, usize)> =
+            [(9, 7, 5), (3, 2, 1)].into_iter().chain(std::iter::repeat_n((1, 1, 1), 30)).collect();
+        let (mut col_ptr, mut row_idx, mut first) = (vec![0usize], Vec::new(), 0);
+        for &(nx, ny, nz) in &parts {
+            let (pattern, _) = grid(nx, ny, nz);
+            for c in 0..pattern.ncols() {
+                row_idx.extend(pattern.row_idx_of_col(c).map(|r| r + first));
+                col_ptr.push(row_idx.len());
+            }
+            first += pattern.nrows();
+        }
+        let pattern = SymbolicSparseColMat::new_checked(first, first, col_ptr, None, row_idx);
+        let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
+        let limit = 8;
+        let coarse = CoarseSpace::new(&blocks, limit, 1024);
+        let sizes = coarse.cycle.component_groups();
+        assert_eq!(sizes.len(), parts.len(), "{sizes:?}");
+        assert!(sizes.iter().map(|g| g * g).sum::<usize>() <= limit * limit, "{sizes:?}");
+        assert!(sizes[0] > 1, "{sizes:?}");
+    }
+
     /// Positions of the blocks of [`grid`]: on a unit lattice, jittered.
     fn lattice(nx: usize, ny: usize, nz: usize) -> Vec<[f64; 3]> {
         (0..nx * ny * nz)
@@ -724,7 +800,7 @@ mod tests {
         let n = pattern.nrows();
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
         // (a limit the aggregates of one round stay under: A₁ is solved exactly)
-        let limit = aggregate(&blocks.ptr, &blocks.rows).1;
+        let limit = aggregate(&blocks.ptr, &blocks.rows, |_| true).1;
         for (rotations, chunk_blocks) in [(false, 1024), (true, 1024), (false, 5), (true, 5)] {
             // restricted in one chunk, and in chunks of 5 blocks (runs of an
             // aggregate cut by chunk ends)
