@@ -461,7 +461,10 @@ impl Run {
             sim: &self.sim,
         };
         crate::checkpoint::write(&self.dir.join(CHECKPOINT_FILE), &saved)
-            .map_err(|e| SceneError::Checkpoint(Box::new(e)))
+            .map_err(|e| SceneError::Checkpoint(Box::new(e)))?;
+        // the run goes on from what the checkpoint holds, as a resumed one
+        self.sim.drop_solver_state();
+        Ok(())
     }
 
     /// Writes frame `index` in every format, the pictures and the time

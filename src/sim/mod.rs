@@ -432,6 +432,19 @@ impl Simulation {
         Ok(())
     }
 
+    /// Drops what the step's solver carries from one step to the next: its
+    /// analysis of the pattern (a CG ordering extends the last one after a
+    /// cut), CG's past corrections and lagged coarse level, a factor. The
+    /// next step then depends on nothing that serialization does not keep,
+    /// exactly as after deserialization, at the price of a fresh analysis.
+    /// [`crate::scene::Run`] calls it whenever it writes a checkpoint, so
+    /// that a resumed run takes the same steps, bit for bit, as the run
+    /// that went on.
+    pub fn drop_solver_state(&mut self) {
+        self.system = StepSystem::default();
+        self.statics = None;
+    }
+
     /// The parameters.
     pub fn params(&self) -> &SimulationParams {
         &self.params

@@ -73,6 +73,19 @@ fn mean_value_run_with_cuts_resumes_bitwise() {
     resumes_bitwise("cube_slice.toml", 120, 40);
 }
 
+/// The conjugate gradients carry state from step to step (the ordering a
+/// cut extended, the past corrections, a lagged coarse level) that a
+/// checkpoint does not hold: the run drops it at every checkpoint, and the
+/// resumed run steps as the straight one did.
+#[test]
+fn conjugate_gradient_run_with_cuts_resumes_bitwise() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(scene("cube_slice.toml")).unwrap();
+    let cg = dir.path().join("cube_slice_cg.toml");
+    std::fs::write(&cg, text.replace("[output]", "[solver]\nkind = \"cg\"\n\n[output]")).unwrap();
+    resumes_bitwise(cg.to_str().unwrap(), 120, 40);
+}
+
 #[test]
 fn harmonic_run_resumes_bitwise() {
     resumes_bitwise("bunny_sliced_harmonic.toml", 6, 3);
