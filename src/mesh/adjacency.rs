@@ -83,33 +83,22 @@ impl Adjacency {
     /// connected), labels numbered from 0 in order of first appearance, and
     /// the number of components.
     pub fn element_components(&self, mesh: &PolyMesh) -> (Vec<u32>, usize) {
-        let n = mesh.elements.len();
-        let mut parent: Vec<u32> = (0..n as u32).collect();
-        fn find(p: &mut [u32], mut x: u32) -> u32 {
-            while p[x as usize] != x {
-                p[x as usize] = p[p[x as usize] as usize];
-                x = p[x as usize];
-            }
-            x
-        }
-        for node in 0..mesh.nodes.len() {
+        let edges = (0..mesh.nodes.len()).flat_map(|node| {
             let els = self.node_elements(node);
-            if let Some((&first, rest)) = els.split_first() {
-                for &e in rest {
-                    let (a, b) = (find(&mut parent, first), find(&mut parent, e));
-                    if a != b {
-                        parent[a.max(b) as usize] = a.min(b);
-                    }
-                }
+            els.iter().skip(1).map(move |&e| (els[0], e))
+        });
+        let root = crate::solve::component_roots(mesh.elements.len(), edges);
+        // every root is its component's first element: labels by first
+        // appearance are the roots in ascending order
+        let mut label = vec![NONE; root.len()];
+        let mut count = 0;
+        for e in 0..root.len() {
+            let r = root[e] as usize;
+            if r == e {
+                count += 1;
             }
+            label[e] = if r == e { count - 1 } else { label[r] };
         }
-        let mut label = vec![NONE; n];
-        let mut root_label: HashMap<u32, u32> = HashMap::new();
-        for (e, l) in label.iter_mut().enumerate() {
-            let r = find(&mut parent, e as u32);
-            let next = root_label.len() as u32;
-            *l = *root_label.entry(r).or_insert(next);
-        }
-        (label, root_label.len())
+        (label, count as usize)
     }
 }

@@ -396,7 +396,7 @@ fn number_by_component(graph: (&[u32], &[u32]), of: &mut [u32], groups: usize) -
     let of_ref = &*of;
     let edges = (0..ptr.len().saturating_sub(1))
         .flat_map(|a| adj[ptr[a] as usize..ptr[a + 1] as usize].iter().map(move |&b| (of_ref[a], of_ref[b as usize])));
-    let root = super::coarse::component_roots(groups, edges);
+    let root = super::ordering::component_roots(groups, edges);
     // a stable counting sort of the groups by their root
     let mut start = vec![0u32; groups + 1];
     root.iter().for_each(|&r| start[r as usize + 1] += 1);

@@ -32,9 +32,9 @@ use super::{BlockStructure, SolveError};
 
 /// The most aggregates whose system the coarse level solves exactly, and
 /// the most aggregates of aggregates the cycle solves exactly otherwise
-/// (for a body in pieces, the budget `Σ m_c² ≤ m²` over the pieces'
-/// dense blocks), for a matrix storing `stored` values: `m = ∛stored / 2`. Its dense
-/// factor of six modes per aggregate then costs `(6m)³ / 3 = 9 · stored`
+/// (for a body in pieces, the budget `Σ m_c² ≤ m²` over the pieces' dense
+/// blocks), for a matrix storing `stored` values: `m = ∛stored / 2`. Its
+/// dense factor of six modes per aggregate then costs `(6m)³ / 3 = 9 · stored`
 /// flops once per step (a few passes over the matrix) and its triangular
 /// solves `36 m²` flops per iteration, a small fraction of the product's
 /// `2 · stored`. (On bunny_100k, 2.3M values, the second aggregation round
@@ -541,32 +541,10 @@ fn coarsen(graph: &(Vec<u32>, Vec<u32>), count: usize, limit: usize) -> Option<(
 fn component_sizes(ptr: &[u32], adj: &[u32]) -> Vec<usize> {
     let n = ptr.len() - 1;
     let edges = (0..n).flat_map(|v| adj[ptr[v] as usize..ptr[v + 1] as usize].iter().map(move |&w| (v as u32, w)));
-    let root = component_roots(n, edges);
+    let root = super::ordering::component_roots(n, edges);
     let mut size = vec![0usize; n];
     root.iter().for_each(|&r| size[r as usize] += 1);
     root.iter().map(|&r| size[r as usize]).collect()
-}
-
-/// The connected components of the `n` vertices joined by `edges`: every
-/// vertex's root, the first vertex of its component.
-pub(super) fn component_roots(n: usize, edges: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
-    let mut root: Vec<u32> = (0..n as u32).collect();
-    let find = |root: &mut [u32], mut v: u32| {
-        while root[v as usize] != v {
-            let up = root[root[v as usize] as usize];
-            root[v as usize] = up;
-            v = up;
-        }
-        v
-    };
-    for (v, w) in edges {
-        let (x, y) = (find(&mut root, v), find(&mut root, w));
-        root[x.max(y) as usize] = x.min(y);
-    }
-    for v in 0..n as u32 {
-        root[v as usize] = find(&mut root, v);
-    }
-    root
 }
 
 /// One round of greedy aggregation of the graph whose vertex `v` has the

@@ -16,7 +16,7 @@ mod tree_solve;
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
 pub use cholesky::{Cholesky, PARALLEL_CHOLESKY_MIN_UNKNOWNS};
 pub use envelope::EnvelopeCholesky;
-pub(crate) use ordering::reverse_cuthill_mckee;
+pub(crate) use ordering::{component_roots, reverse_cuthill_mckee};
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use thiserror::Error;

@@ -1,4 +1,5 @@
-//! Orderings of a matrix's blocks for locality: reverse Cuthill–McKee, and
+//! Orderings of a matrix's blocks for locality: reverse Cuthill–McKee (and
+//! the connected components of a graph), and
 //! a 3x3 block structure renumbered into such an order, with the maps that
 //! carry its values and vectors there and back.
 //!
@@ -16,6 +17,28 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use super::BlockStructure;
+
+/// The connected components of the `n` vertices joined by `edges`: every
+/// vertex's root, the first (lowest-numbered) vertex of its component.
+pub(crate) fn component_roots(n: usize, edges: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
+    let mut root: Vec<u32> = (0..n as u32).collect();
+    let find = |root: &mut [u32], mut v: u32| {
+        while root[v as usize] != v {
+            let up = root[root[v as usize] as usize];
+            root[v as usize] = up;
+            v = up;
+        }
+        v
+    };
+    for (v, w) in edges {
+        let (x, y) = (find(&mut root, v), find(&mut root, w));
+        root[x.max(y) as usize] = x.min(y);
+    }
+    for v in 0..n as u32 {
+        root[v as usize] = find(&mut root, v);
+    }
+    root
+}
 
 /// Reverse Cuthill–McKee order of a graph of `n` vertices: per connected
 /// component, a breadth-first search from a pseudo-peripheral vertex
