@@ -100,11 +100,17 @@ impl Simulation {
         let mut keep_whole: Vec<u32> = Vec::new();
         // (every attempt starts from the same mesh: the scope holds for all)
         let listed = self.cut_scope(plane, polygon);
+        let size = |mesh: &PolyMesh| (mesh.nodes.len(), mesh.elements.len(), mesh.faces.len());
+        let size_before = size(&self.mesh);
         let result = loop {
             let scope = listed.as_deref().map_or(CutScope::whole(), |l| CutScope::listed(&self.mesh, l));
             let rollback = Rollback::around_plane(&self.mesh, plane, scope);
             let outcome = match cut(&mut self.mesh, &keep_whole, scope) {
                 Err(error) => Err((None, error)),
+                // a cut that misses the body, or meets it only along faces
+                // it leaves joined, changes nothing: the element data, the
+                // pattern, its analysis and the solver's carried state stand
+                Ok(report) if report.cut.touched.is_empty() && size(&self.mesh) == size_before => Ok(report),
                 Ok(report) => match self.apply_cut(&report) {
                     Ok(()) => Ok(report),
                     Err(error) => {
