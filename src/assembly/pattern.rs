@@ -75,7 +75,7 @@ const BUILT_SPARE: usize = 8;
 /// The part of its length an array keeps to spare when a cut outgrows it:
 /// cuts come in series (a swept blade), and each growth copies the whole
 /// array and faults in its pages (a blade cut across bunny_100k adds about
-/// 2.5 % to the arrays; at an eighth to spare, every fifth cut took 15-20
+/// 2.5 % to the arrays; at an eighth to spare, every fifth cut took 15-25
 /// ms more to grow them).
 const CUT_SPARE: usize = 2;
 
