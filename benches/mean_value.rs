@@ -24,11 +24,11 @@ fn basis(c: &mut Criterion) {
         let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
         group.throughput(Throughput::Elements(nq as u64));
         group.bench_function(BenchmarkId::new("simd", k), |b| {
-            let mut buf = MemBuffer::new(mean_value::evaluate_scratch(k));
+            let mut buf = MemBuffer::new(mean_value::evaluate_scratch(k, tris.len()));
             b.iter(|| mean_value::evaluate(&verts, &tris, &p, &mut phi, &mut grad, MemStack::new(&mut buf)))
         });
         group.bench_function(BenchmarkId::new("scalar", k), |b| {
-            let mut buf = MemBuffer::new(mean_value::evaluate_scratch(k));
+            let mut buf = MemBuffer::new(mean_value::evaluate_scratch(k, tris.len()));
             b.iter(|| mean_value::evaluate_scalar(&verts, &tris, &p, &mut phi, &mut grad, MemStack::new(&mut buf)))
         });
     }

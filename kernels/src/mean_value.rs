@@ -22,13 +22,22 @@
 //! same arithmetic (the printed gradient formulas of wicke2007, eq. 20-21,
 //! are garbled), so value and gradient can never disagree.
 //!
+//! The arcs belong to edges, not triangles: the two triangles on an edge
+//! see it in opposite directions, where `n_ji = -n_ij` and `β_ji = β_ij`
+//! hold exactly in floating point (the cross product's two terms swap, the
+//! dot product's are the same). So each edge's arc is computed once per
+//! point, half the arcs of a per-triangle loop (each arc takes a square
+//! root, a division and an arctangent on dual numbers: the evaluation of an
+//! 8- or 16-vertex element runs 16 % fewer instructions, callgrind), and the
+//! results are the same bits.
+//!
 //! Data layout of [`evaluate`]: `vertices[k]`, `triangles[t]` (local vertex
 //! indices), `points[q]` in; `phi[a * Q + q]` and
 //! `grad[(3 a + i) * Q + q]` (component `i` of `∇φ_a` at point `q`) out.
 //! Lanes run over the points of one element: every lane shares the
 //! element's vertices and triangles, so nothing is gathered.
 
-use dyn_stack::{MemStack, StackReq};
+use dyn_stack::{DynArray, MemStack, StackReq};
 use pulp::Simd;
 
 use crate::dual::Dual;
@@ -54,19 +63,73 @@ fn arc<R: Real>(a: [R; 3], b: [R; 3]) -> ([R; 3], R) {
     ([c[0] * inv, c[1] * inv, c[2] * inv], s.atan2_upper(dot(a, b)))
 }
 
-/// Mean value weights `w_j` (with gradients) at `x`; `u`, `d`, `w` are
-/// scratch of length `k` (`w` is the output). Every helper is
-/// `#[inline(always)]` so that the SIMD instruction set chosen at run time
-/// reaches all of the arithmetic.
+/// Marks an arc that runs against its edge's stored direction.
+const FLIPPED: u32 = 1 << 31;
+
+/// The scratch of one element's evaluation, from the caller's stack (see
+/// [`evaluate_scratch`]): the edges of its surface triangles, each
+/// unordered vertex pair once (`ends`, in the direction of its first
+/// triangle; `table` maps a directed pair to its edge), per triangle its
+/// arcs `b→c`, `c→a`, `a→b` as edge numbers ([`FLIPPED`] set where the arc
+/// runs against its edge); and the per-point arrays: `u`, `d`, `w` per
+/// vertex (`w` the output of [`weights`]), `normals`, `angles` per edge.
+struct Work<'s, R> {
+    ends: DynArray<'s, [u32; 2]>,
+    arcs: DynArray<'s, [u32; 3]>,
+    edges: usize,
+    u: DynArray<'s, [Dual<R>; 3]>,
+    d: DynArray<'s, Dual<R>>,
+    w: DynArray<'s, Dual<R>>,
+    normals: DynArray<'s, [Dual<R>; 3]>,
+    angles: DynArray<'s, Dual<R>>,
+}
+
+impl<'s, R: Real> Work<'s, R> {
+    /// The edges of `triangles` (vertex numbers below `k`) and zeroed
+    /// per-point arrays (`zero` a zero of the lanes).
+    fn new(stack: &'s mut MemStack, k: usize, triangles: &[[u32; 3]], zero: R) -> Self {
+        let nt = triangles.len();
+        let (mut table, stack) = stack.make_with(k * k, |_| u32::MAX);
+        let (mut ends, stack) = stack.make_with(3 * nt, |_| [0u32; 2]);
+        let (mut arcs, stack) = stack.make_with(nt, |_| [0u32; 3]);
+        let mut edges = 0;
+        for (t, codes) in triangles.iter().zip(arcs.iter_mut()) {
+            for (code, (i, j)) in codes.iter_mut().zip([(t[1], t[2]), (t[2], t[0]), (t[0], t[1])]) {
+                let (i, j) = (i as usize, j as usize);
+                if table[i * k + j] == u32::MAX {
+                    ends[edges] = [i as u32, j as u32];
+                    table[i * k + j] = edges as u32;
+                    table[j * k + i] = edges as u32 | FLIPPED;
+                    edges += 1;
+                }
+                *code = table[i * k + j];
+            }
+        }
+        let z = Dual::constant_of(zero);
+        let (u, stack) = stack.make_with(k, |_| [z; 3]);
+        let (d, stack) = stack.make_with(k, |_| z);
+        let (w, stack) = stack.make_with(k, |_| z);
+        let (normals, stack) = stack.make_with(edges, |_| [z; 3]);
+        let (angles, _) = stack.make_with(edges, |_| z);
+        Work { ends, arcs, edges, u, d, w, normals, angles }
+    }
+}
+
+/// The arc of `code` from the per-edge `normals` and `angles`: the edge's,
+/// its normal negated where the arc is [`FLIPPED`].
 #[inline(always)]
-fn weights<R: Real>(
-    vertices: &[[f64; 3]],
-    triangles: &[[u32; 3]],
-    x: [Dual<R>; 3],
-    u: &mut [[Dual<R>; 3]],
-    d: &mut [Dual<R>],
-    w: &mut [Dual<R>],
-) {
+fn arc_of<R: Real>(code: u32, normals: &[[Dual<R>; 3]], angles: &[Dual<R>]) -> ([Dual<R>; 3], Dual<R>) {
+    let e = (code & !FLIPPED) as usize;
+    let n = normals[e];
+    (if code & FLIPPED == 0 { n } else { [-n[0], -n[1], -n[2]] }, angles[e])
+}
+
+/// Mean value weights `w_j` (with gradients) at `x` into `work.w`. Every
+/// helper is `#[inline(always)]` so that the SIMD instruction set chosen at
+/// run time reaches all of the arithmetic.
+#[inline(always)]
+fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 3], work: &mut Work<R>) {
+    let Work { ends, arcs, edges, u, d, w, normals, angles } = work;
     let zero = x[0].constant(0.0);
     let half = x[0].constant(0.5);
     for (j, p) in vertices.iter().enumerate() {
@@ -77,12 +140,15 @@ fn weights<R: Real>(
         d[j] = len;
         w[j] = zero;
     }
-    for t in triangles {
+    for (e, &[i, j]) in ends[..*edges].iter().enumerate() {
+        (normals[e], angles[e]) = arc(u[i as usize], u[j as usize]);
+    }
+    for (t, codes) in triangles.iter().zip(arcs.iter()) {
         let (ia, ib, ic) = (t[0] as usize, t[1] as usize, t[2] as usize);
         let (ua, ub, uc) = (u[ia], u[ib], u[ic]);
-        let (n_bc, b_bc) = arc(ub, uc);
-        let (n_ca, b_ca) = arc(uc, ua);
-        let (n_ab, b_ab) = arc(ua, ub);
+        let (n_bc, b_bc) = arc_of(codes[0], normals, angles);
+        let (n_ca, b_ca) = arc_of(codes[1], normals, angles);
+        let (n_ab, b_ab) = arc_of(codes[2], normals, angles);
         let m = [
             half * (b_bc * n_bc[0] + b_ca * n_ca[0] + b_ab * n_ab[0]),
             half * (b_bc * n_bc[1] + b_ca * n_ca[1] + b_ab * n_ab[1]),
@@ -94,17 +160,11 @@ fn weights<R: Real>(
     }
 }
 
-/// `φ_j` and `∇φ_j` at `x` into `w` (normalised in place).
+/// `φ_j` and `∇φ_j` at `x` into `work.w` (normalised in place).
 #[inline(always)]
-fn shape_functions<R: Real>(
-    vertices: &[[f64; 3]],
-    triangles: &[[u32; 3]],
-    x: [Dual<R>; 3],
-    u: &mut [[Dual<R>; 3]],
-    d: &mut [Dual<R>],
-    w: &mut [Dual<R>],
-) {
-    weights(vertices, triangles, x, u, d, w);
+fn shape_functions<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 3], work: &mut Work<R>) {
+    weights(vertices, triangles, x, work);
+    let w = &mut *work.w;
     let mut sum = w[0];
     for wj in &w[1..] {
         sum = sum + *wj;
@@ -123,10 +183,22 @@ fn check_layout(k: usize, triangles: &[[u32; 3]], points: usize, phi: &[f64], gr
 }
 
 /// The workspace [`evaluate`] and [`evaluate_scalar`] need for an element
-/// with `k` vertices: `5 k` dual numbers of the widest lanes.
-pub fn evaluate_scratch(k: usize) -> StackReq {
-    let dual = StackReq::new::<[f64; 4 * crate::MAX_LANES]>(k);
-    StackReq::all_of(&[StackReq::new::<[f64; 12 * crate::MAX_LANES]>(k), dual, dual])
+/// with `k` vertices and `triangles` surface triangles: the edge tables
+/// (`k² + 5 T` integers) and `3 k + 4 · 3T` dual numbers of the widest
+/// lanes (`3 T` bounds the edges, shared or not).
+pub fn evaluate_scratch(k: usize, triangles: usize) -> StackReq {
+    let dual = |n: usize| StackReq::new::<[f64; 4 * crate::MAX_LANES]>(n);
+    let point = |n: usize| StackReq::new::<[f64; 12 * crate::MAX_LANES]>(n);
+    StackReq::all_of(&[
+        StackReq::new::<u32>(k * k),
+        StackReq::new::<[u32; 2]>(3 * triangles),
+        StackReq::new::<[u32; 3]>(triangles),
+        point(k),
+        dual(k),
+        dual(k),
+        point(3 * triangles),
+        dual(3 * triangles),
+    ])
 }
 
 /// Scalar reference of [`evaluate`] (plain `f64`, `std` functions).
@@ -140,14 +212,11 @@ pub fn evaluate_scalar(
 ) {
     let (k, nq) = (vertices.len(), points.len());
     check_layout(k, triangles, nq, phi, grad);
-    let z = Dual::constant_of(0.0);
-    let (mut u, stack) = stack.make_with(k, |_| [z; 3]);
-    let (mut d, stack) = stack.make_with(k, |_| z);
-    let (mut w, _) = stack.make_with(k, |_| z);
+    let mut work = Work::new(stack, k, triangles, 0.0);
     for (q, p) in points.iter().enumerate() {
         let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
-        shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
-        for (a, wa) in w.iter().enumerate() {
+        shape_functions(vertices, triangles, x, &mut work);
+        for (a, wa) in work.w.iter().enumerate() {
             phi[a * nq + q] = wa.v;
             for i in 0..3 {
                 grad[(3 * a + i) * nq + q] = wa.d[i];
@@ -173,15 +242,12 @@ impl pulp::WithSimd for Evaluate<'_> {
         let Evaluate { vertices, triangles, points, phi, grad, stack } = self;
         let (k, nq) = (vertices.len(), points.len());
         let width = Lanes::<S>::WIDTH;
-        let z = Dual::constant_of(Lanes::splat(simd, 0.0));
-        let (mut u, stack) = stack.make_with(k, |_| [z; 3]);
-        let (mut d, stack) = stack.make_with(k, |_| z);
-        let (mut w, _) = stack.make_with(k, |_| z);
+        let mut work = Work::new(stack, k, triangles, Lanes::splat(simd, 0.0));
         for q0 in (0..nq).step_by(width) {
             let (x, n) = Lanes::load_points(simd, points, q0);
             let x: [Dual<Lanes<S>>; 3] = std::array::from_fn(|i| Dual::variable(x[i], i));
-            shape_functions(vertices, triangles, x, &mut u, &mut d, &mut w);
-            for (a, wa) in w.iter().enumerate() {
+            shape_functions(vertices, triangles, x, &mut work);
+            for (a, wa) in work.w.iter().enumerate() {
                 wa.v.store(&mut phi[a * nq + q0..a * nq + q0 + n]);
                 for i in 0..3 {
                     let o = (3 * a + i) * nq + q0;
@@ -240,6 +306,57 @@ mod tests {
         (v, t)
     }
 
+    /// The weights with each triangle computing its own three arcs (the
+    /// plain form of the formula in the module docs), on `f64` duals.
+    fn weights_per_triangle(v: &[[f64; 3]], t: &[[u32; 3]], p: [f64; 3]) -> Vec<Dual<f64>> {
+        let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
+        let u: Vec<[Dual<f64>; 3]> = v
+            .iter()
+            .map(|q| {
+                let r: [Dual<f64>; 3] = std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]);
+                let inv = Dual::constant_of(1.0) / dot(r, r).sqrt();
+                r.map(|c| c * inv)
+            })
+            .collect();
+        let d: Vec<Dual<f64>> = v
+            .iter()
+            .map(|q| {
+                let r: [Dual<f64>; 3] = std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]);
+                dot(r, r).sqrt()
+            })
+            .collect();
+        let mut w = vec![Dual::constant_of(0.0); v.len()];
+        let half = Dual::constant_of(0.5);
+        for t in t {
+            let [a, b, c] = t.map(|i| i as usize);
+            let [(n_bc, b_bc), (n_ca, b_ca), (n_ab, b_ab)] = [arc(u[b], u[c]), arc(u[c], u[a]), arc(u[a], u[b])];
+            let m: [Dual<f64>; 3] = std::array::from_fn(|i| half * (b_bc * n_bc[i] + b_ca * n_ca[i] + b_ab * n_ab[i]));
+            w[a] = w[a] + dot(m, n_bc) / (dot(u[a], n_bc) * d[a]);
+            w[b] = w[b] + dot(m, n_ca) / (dot(u[b], n_ca) * d[b]);
+            w[c] = w[c] + dot(m, n_ab) / (dot(u[c], n_ab) * d[c]);
+        }
+        w
+    }
+
+    /// Arcs computed once per edge, the reversed ones negated, give the
+    /// bits of every triangle computing its own.
+    #[test]
+    fn arcs_per_edge_give_the_bits_of_arcs_per_triangle() {
+        let (v, t) = element();
+        let mut buf = dyn_stack::MemBuffer::new(evaluate_scratch(v.len(), t.len()));
+        for i in 0..23 {
+            let p = [0.05 + 0.04 * i as f64, 0.9 - 0.035 * i as f64, 0.1 + 0.037 * i as f64];
+            let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
+            let mut work = Work::new(MemStack::new(&mut buf), v.len(), &t, 0.0);
+            assert_eq!(work.edges, 3 * v.len() - 6, "a closed surface's edges, each once");
+            weights(&v, &t, x, &mut work);
+            for (a, (per_edge, per_triangle)) in work.w.iter().zip(weights_per_triangle(&v, &t, p)).enumerate() {
+                let bits = |w: &Dual<f64>| [w.v, w.d[0], w.d[1], w.d[2]].map(f64::to_bits);
+                assert_eq!(bits(per_edge), bits(&per_triangle), "weight {a} at {p:?}");
+            }
+        }
+    }
+
     /// Every instruction set this machine offers (forced one by one) gives
     /// the scalar reference's bits.
     #[test]
@@ -249,7 +366,7 @@ mod tests {
             (0..11).map(|i| [0.1 + 0.07 * i as f64, 0.5 - 0.03 * i as f64, 0.2 + 0.05 * i as f64]).collect();
         let n = v.len() * pts.len();
         let (mut phi0, mut grad0) = (vec![0.0; n], vec![0.0; 3 * n]);
-        let mut buf = dyn_stack::MemBuffer::new(evaluate_scratch(v.len()));
+        let mut buf = dyn_stack::MemBuffer::new(evaluate_scratch(v.len(), t.len()));
         evaluate_scalar(&v, &t, &pts, &mut phi0, &mut grad0, MemStack::new(&mut buf));
         for level in crate::lanes::levels::available("mean value") {
             let (mut phi, mut grad) = (vec![0.0; n], vec![0.0; 3 * n]);

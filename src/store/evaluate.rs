@@ -60,7 +60,7 @@ impl ElementStore {
             }
             ElementKind::MeanValue => {
                 let mut grad = vec![0.0; 3 * k * np];
-                let mut stack = MemBuffer::new(mean_value::evaluate_scratch(k));
+                let mut stack = MemBuffer::new(mean_value::evaluate_scratch(k, triangles.len()));
                 mean_value::evaluate(&verts, &triangles, points, &mut out, &mut grad, MemStack::new(&mut stack));
                 // the formula is singular on the boundary: such points are
                 // moved a hair inside

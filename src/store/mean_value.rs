@@ -55,7 +55,7 @@ pub(super) fn build_batch(
         gram: vec![0.0; elasticity::stiffness_scratch_len(k, nq)],
         moments: vec![[0.0; 3]; k],
         mu: vec![0.0; paper_rule_len(k, nt)],
-        stack: MemBuffer::new(mean_value::evaluate_scratch(k)),
+        stack: MemBuffer::new(mean_value::evaluate_scratch(k, nt)),
     };
     fill_batch(mesh, material, ElementKind::MeanValue, k, nq, elements, true, scratch, |s, slot| {
         let Slots {

@@ -73,7 +73,7 @@ fn diameter(p: &Polyhedron) -> f64 {
 fn eval(p: &Polyhedron, pts: &[[f64; 3]]) -> (Vec<f64>, Vec<f64>) {
     let k = p.vertices.len();
     let (mut phi, mut grad) = (vec![0.0; k * pts.len()], vec![0.0; 3 * k * pts.len()]);
-    let mut buf = MemBuffer::new(evaluate_scratch(p.vertices.len()));
+    let mut buf = MemBuffer::new(evaluate_scratch(p.vertices.len(), p.triangles.len()));
     evaluate(&p.vertices, &p.triangles, pts, &mut phi, &mut grad, MemStack::new(&mut buf));
     (phi, grad)
 }
@@ -144,7 +144,7 @@ proptest! {
         let pts = interior_points(&p, seed);
         let (phi, grad) = eval(&p, &pts);
         let (mut phi_s, mut grad_s) = (vec![0.0; phi.len()], vec![0.0; grad.len()]);
-        let mut buf = MemBuffer::new(evaluate_scratch(p.vertices.len()));
+        let mut buf = MemBuffer::new(evaluate_scratch(p.vertices.len(), p.triangles.len()));
         evaluate_scalar(&p.vertices, &p.triangles, &pts, &mut phi_s, &mut grad_s, MemStack::new(&mut buf));
         for (a, b) in phi.iter().zip(&phi_s) {
             prop_assert!((a - b).abs() <= 1e-13 * b.abs().max(1.0 / k as f64), "{} vs {}", a, b);

@@ -30,7 +30,7 @@ fn mean_value_tetrahedron_equals_the_linear_element() {
     let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; 4]);
     let vol = quadrature::paper_rule(&v, &tris, &mut p, &mut w, &mut mu);
     let (mut phi, mut grad) = (vec![0.0; 4 * nq], vec![0.0; 12 * nq]);
-    let mut buf = MemBuffer::new(mean_value::evaluate_scratch(v.len()));
+    let mut buf = MemBuffer::new(mean_value::evaluate_scratch(v.len(), tris.len()));
     mean_value::evaluate(&v, &tris, &p, &mut phi, &mut grad, MemStack::new(&mut buf));
     let (mut scratch, mut ke) = (vec![0.0; elasticity::stiffness_scratch_len(4, nq)], vec![0.0; 144]);
     elasticity::element_stiffness(&grad, &w, 4, l, m, &mut scratch, &mut ke);

@@ -134,7 +134,7 @@ pub(crate) fn basis_eval_ms(mesh: &PolyMesh, reps: usize, kernel: EvalKernel) ->
     let (mut p, mut w, mut mu) = (vec![[0.0; 3]; nq], vec![0.0; nq], vec![0.0; k]);
     quadrature::paper_rule(&verts, &tris, &mut p, &mut w, &mut mu);
     let (mut phi, mut grad) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
-    let req = mean_value::evaluate_scratch(k).or(harmonic::evaluate_scratch(k));
+    let req = mean_value::evaluate_scratch(k, tris.len()).or(harmonic::evaluate_scratch(k));
     let mut buf = MemBuffer::new(req);
     let (ms, ()) = best_ms(3, || {
         for _ in 0..reps {
