@@ -83,6 +83,33 @@ pub(crate) fn in_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     rayon::join(f, || ()).0
 }
 
+/// The room an array sized by a body's topology keeps for the growth cuts
+/// bring, as a part of its length: an eighth when it is first sized (the
+/// first cuts fit), half when a cut outgrows it (cuts come in series: a
+/// swept blade adds about 2.5 % to bunny_100k's arrays per cut). Growing
+/// copies the whole array and faults in its pages: without the room, the
+/// first blade cut across bunny_100k took 40-50 ms more than the next (the
+/// step system's and CG's values, the coarse level's runs), and with an
+/// eighth at every growth every fifth cut took 15-25 ms more.
+const FIRST_ROOM: usize = 8;
+const GROWN_ROOM: usize = 2;
+
+/// Makes `array`'s capacity at least `len`, with the room of [`FIRST_ROOM`]
+/// and [`GROWN_ROOM`] when it grows.
+pub(crate) fn reserve_room<T>(array: &mut Vec<T>, len: usize) {
+    if len > array.capacity() {
+        let room = if array.capacity() == 0 { len / FIRST_ROOM } else { len / GROWN_ROOM };
+        array.reserve_exact(len + room - array.len());
+    }
+}
+
+/// Sets `array`'s length to `len` (new items `fill`) after
+/// [`reserve_room`].
+pub(crate) fn resize_with_room<T: Clone>(array: &mut Vec<T>, len: usize, fill: T) {
+    reserve_room(array, len);
+    array.resize(len, fill);
+}
+
 /// `slice` cut into consecutive stretches of the given `lengths` (their sum
 /// at most its length), for parallel tasks that each write their own.
 pub(crate) fn stretches<T>(slice: &mut [T], lengths: impl IntoIterator<Item = usize>) -> Vec<&mut [T]> {
@@ -145,5 +172,23 @@ mod tests {
             part.fill(k + 1);
         }
         assert_eq!(values, [1, 1, 3, 3, 3, 0, 0]);
+    }
+
+    /// An array first sized keeps an eighth to spare, so growth within it
+    /// stays in place; one outgrown takes half its length to spare; new
+    /// items take the fill, old ones stay.
+    #[test]
+    fn arrays_keep_room_for_growth() {
+        let mut array: Vec<u32> = Vec::new();
+        super::resize_with_room(&mut array, 800, 7);
+        assert_eq!((array.len(), array.capacity()), (800, 900));
+        let first = array.as_ptr();
+        super::resize_with_room(&mut array, 900, 8);
+        assert_eq!((array.as_ptr(), array.capacity()), (first, 900), "growth within the room stays in place");
+        super::resize_with_room(&mut array, 1000, 9);
+        assert_eq!(array.capacity(), 1500);
+        assert_eq!((array[799], array[800], array[899], array[900], array[999]), (7, 8, 8, 9, 9));
+        super::resize_with_room(&mut array, 10, 0);
+        assert_eq!((array.len(), array.capacity()), (10, 1500), "shrinking keeps the memory");
     }
 }

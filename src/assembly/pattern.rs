@@ -68,27 +68,6 @@ pub struct SparsePattern {
     diagonal: Vec<u32>,
 }
 
-/// The part of its length a pattern's array keeps to spare when it is laid
-/// out: the first cuts' columns fit without copying the arrays.
-const BUILT_SPARE: usize = 8;
-
-/// The part of its length an array keeps to spare when a cut outgrows it:
-/// cuts come in series (a swept blade), and each growth copies the whole
-/// array and faults in its pages (a blade cut across bunny_100k adds about
-/// 2.5 % to the arrays; at an eighth to spare, every fifth cut took 15-25
-/// ms more to grow them).
-const CUT_SPARE: usize = 2;
-
-/// `array` at length `len`, new items `fill`: when it outgrows its
-/// capacity it takes `len / spare` to spare, so that the columns the next
-/// cuts append neither copy it nor fault in its pages again.
-fn grow<T: Clone>(array: &mut Vec<T>, len: usize, fill: T, spare: usize) {
-    if len > array.capacity() {
-        array.reserve_exact(len + len / spare - array.len());
-    }
-    array.resize(len, fill);
-}
-
 /// A pattern as a checkpoint stores it: the arrays, the compressed
 /// columns as plain vectors (faer's structure has no serde support).
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -345,7 +324,7 @@ fn move_columns<T: Copy>(array: &mut [T], recomputed: &[bool], old: &[usize], ne
 /// set to the new end (new items `fill`).
 fn relocate<T: Copy>(array: &mut Vec<T>, recomputed: &[bool], old: &[usize], new: &[usize], fill: T) {
     let end = new[new.len() - 1];
-    grow(array, end.max(array.len()), fill, CUT_SPARE);
+    crate::resize_with_room(array, end.max(array.len()), fill);
     move_columns(array, recomputed, old, new);
     array.truncate(end);
 }
@@ -517,8 +496,8 @@ impl SparsePattern {
                 relocate(slot_array, &dirty, &old_slots, &slots, 0);
             },
         );
-        grow(&mut self.col_stride, num_blocks, 0, CUT_SPARE);
-        grow(&mut self.diagonal, num_blocks, 0, CUT_SPARE);
+        crate::resize_with_room(&mut self.col_stride, num_blocks, 0);
+        crate::resize_with_room(&mut self.diagonal, num_blocks, 0);
         // the new columns written in parallel, each into its own stretches
         let sizes: Vec<[usize; 4]> =
             new.iter().map(|c| [9 * c.rows.len(), c.rows.len(), c.incidences.len(), c.slots()]).collect();
@@ -595,10 +574,10 @@ impl SparsePattern {
         starts.push(at);
         let (mut row_idx, mut block_rows) = (Vec::new(), Vec::new());
         let (mut incidences, mut slots) = (Vec::new(), Vec::new());
-        grow(&mut row_idx, 9 * at[0], 0, BUILT_SPARE);
-        grow(&mut block_rows, at[0], 0, BUILT_SPARE);
-        grow(&mut incidences, at[1], UNSET, BUILT_SPARE);
-        grow(&mut slots, at[2], 0, BUILT_SPARE);
+        crate::resize_with_room(&mut row_idx, 9 * at[0], 0);
+        crate::resize_with_room(&mut block_rows, at[0], 0);
+        crate::resize_with_room(&mut incidences, at[1], UNSET);
+        crate::resize_with_room(&mut slots, at[2], 0);
         // the arrays cut into the stretches of runs of columns
         let ranges: Vec<std::ops::Range<usize>> =
             (0..num_blocks).step_by(LAY_OUT_RUN).map(|first| first..(first + LAY_OUT_RUN).min(num_blocks)).collect();

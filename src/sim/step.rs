@@ -89,9 +89,10 @@ impl StepSystem {
     }
 
     /// Makes this the system of a new topology's `pattern`, keeping the
-    /// buffers' memory, the solver's too when the same solver serves the
-    /// new size (it analyses the new pattern before the next solve): after
-    /// a cut the next step writes into pages it already has.
+    /// buffers' memory (with room for cuts: [`crate::reserve_room`]), the
+    /// solver's too when the same solver serves the new size (it analyses
+    /// the new pattern before the next solve): after a cut the next step
+    /// writes into pages it already has.
     pub fn renew(&mut self, kind: SolverKind, pattern: &SparsePattern, tolerance: f64, max_iterations: usize) {
         let n = 3 * pattern.num_blocks;
         let made = (SolverChoice::of(kind, n), tolerance, max_iterations);
@@ -101,10 +102,10 @@ impl StepSystem {
         (self.analysed, self.referenced) = (false, false);
         // (every value is written by the next assembly, every entry of the
         // vectors by the next step: only their lengths matter)
-        self.values.resize(pattern.nnz(), 0.0);
-        self.rhs.resize(n, 0.0);
-        self.velocity.resize(n, 0.0);
-        self.force.resize(pattern.num_blocks, [0.0; 3]);
+        crate::resize_with_room(&mut self.values, pattern.nnz(), 0.0);
+        crate::resize_with_room(&mut self.rhs, n, 0.0);
+        crate::resize_with_room(&mut self.velocity, n, 0.0);
+        crate::resize_with_room(&mut self.force, pattern.num_blocks, [0.0; 3]);
         self.constraints = Constraints::free(n);
         for buffer in [&mut self.reference, &mut self.reference_rhs] {
             buffer.clear();

@@ -834,7 +834,7 @@ impl LinearSolver for ConjugateGradient {
             return Err(SolveError::Analysis(format!("block {block} has no diagonal")));
         }
         let blocks = self.numbering.blocks();
-        self.inverse_blocks.resize(n / 3, [0.0; 6]);
+        crate::resize_with_room(&mut self.inverse_blocks, n / 3, [0.0; 6]);
         // (the rotated rest-state factor replaces block Jacobi and its
         // coarse level, and takes the new reference before a solve)
         let limit = aggregate_limit(pattern.row_idx().len());
@@ -845,14 +845,15 @@ impl LinearSolver for ConjugateGradient {
         if let Some(rest) = self.rest.as_mut() {
             rest.ready = false;
         }
-        // (every entry is written before it is read in a solve)
-        self.values.resize(pattern.row_idx().len(), 0.0);
-        self.values32.resize(pattern.row_idx().len(), 0.0);
+        // (every entry is written before it is read in a solve; the arrays
+        // keep room for the next cuts, [`crate::reserve_room`])
+        crate::resize_with_room(&mut self.values, pattern.row_idx().len(), 0.0);
+        crate::resize_with_room(&mut self.values32, pattern.row_idx().len(), 0.0);
         self.carried = false;
         for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.x_given] {
-            v.resize(n, 0.0);
+            crate::resize_with_room(v, n, 0.0);
         }
-        self.r_given.resize(n, 0.0);
+        crate::resize_with_room(&mut self.r_given, n, 0.0);
         let chunks = (n / 3).div_ceil(CHUNK_BLOCKS);
         self.partial.resize(chunks, 0.0);
         self.partial_pairs.resize(chunks, [0.0; 2]);

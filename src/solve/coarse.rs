@@ -169,13 +169,16 @@ impl CoarseSpace {
             run_ptr.push(run_ptr[run_ptr.len() - 1] + count);
         }
         let (mut run_aggregate, mut run_slot, mut run_sums) = (old.run_aggregate, old.run_slot, old.run_sums);
+        let runs = run_ptr[n] as usize;
         run_aggregate.clear();
         run_slot.clear();
+        crate::reserve_room(&mut run_aggregate, runs);
+        crate::reserve_room(&mut run_slot, runs);
         listed.iter().for_each(|(_, aggregates, slots)| {
             run_aggregate.extend_from_slice(aggregates);
             run_slot.extend_from_slice(slots);
         });
-        run_sums.resize(run_aggregate.len(), [0.0; 18]);
+        crate::resize_with_room(&mut run_sums, runs, [0.0; 18]);
         let mut system = old.system;
         (system.ptr, system.rows) = (graph_ptr, graph_rows);
         let cycle = AggregateCycle::renew(count, grouping, (&system.ptr, &system.rows), old.cycle);

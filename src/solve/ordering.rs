@@ -227,19 +227,22 @@ impl Renumbering {
             }
         }
         self.old_start.clear();
+        crate::reserve_room(&mut self.old_start, n);
         self.old_start.extend(self.order.iter().map(|&o| old.start[o as usize]));
         let blocks = &mut self.blocks;
         blocks.ptr.clear();
+        crate::reserve_room(&mut blocks.ptr, n + 1);
         blocks.ptr.push(0);
         for &o in &self.order {
             let end = blocks.ptr[blocks.ptr.len() - 1] + old.column_rows(o as usize).len() as u32;
             blocks.ptr.push(end);
         }
         blocks.start.clear();
+        crate::reserve_room(&mut blocks.start, n);
         blocks.start.extend(blocks.ptr[..n].iter().map(|&p| 9 * p as usize));
         let total = old.rows_len();
-        blocks.rows.resize(total, 0);
-        self.source.resize(total, 0);
+        crate::resize_with_room(&mut blocks.rows, total, 0);
+        crate::resize_with_room(&mut self.source, total, 0);
         // each task sorts its columns' rows into their new numbers
         let (order, rank) = (&self.order, &self.rank);
         let sort = |columns: Range<usize>, rows: &mut [u32], source: &mut [u32]| {
@@ -260,6 +263,7 @@ impl Renumbering {
         // the place of every new column's diagonal block among its rows
         let (rows, ptr) = (&blocks.rows, &blocks.ptr);
         self.diagonal.clear();
+        crate::reserve_room(&mut self.diagonal, n);
         self.diagonal.par_extend((0..n).into_par_iter().map(|j| {
             let column = &rows[ptr[j] as usize..ptr[j + 1] as usize];
             column.binary_search(&(j as u32)).map_or(u32::MAX, |p| p as u32)
@@ -268,7 +272,7 @@ impl Renumbering {
 
     /// Sets `rank` to the inverse of `order`.
     fn rank_by(&mut self, order: &[u32]) {
-        self.rank.resize(order.len(), 0);
+        crate::resize_with_room(&mut self.rank, order.len(), 0);
         for (new, &o) in order.iter().enumerate() {
             self.rank[o as usize] = new as u32;
         }
