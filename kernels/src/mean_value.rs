@@ -310,21 +310,15 @@ mod tests {
     /// plain form of the formula in the module docs), on `f64` duals.
     fn weights_per_triangle(v: &[[f64; 3]], t: &[[u32; 3]], p: [f64; 3]) -> Vec<Dual<f64>> {
         let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
-        let u: Vec<[Dual<f64>; 3]> = v
+        let (u, d): (Vec<[Dual<f64>; 3]>, Vec<Dual<f64>>) = v
             .iter()
             .map(|q| {
                 let r: [Dual<f64>; 3] = std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]);
-                let inv = Dual::constant_of(1.0) / dot(r, r).sqrt();
-                r.map(|c| c * inv)
+                let len = dot(r, r).sqrt();
+                let inv = Dual::constant_of(1.0) / len;
+                (r.map(|c| c * inv), len)
             })
-            .collect();
-        let d: Vec<Dual<f64>> = v
-            .iter()
-            .map(|q| {
-                let r: [Dual<f64>; 3] = std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]);
-                dot(r, r).sqrt()
-            })
-            .collect();
+            .unzip();
         let mut w = vec![Dual::constant_of(0.0); v.len()];
         let half = Dual::constant_of(0.5);
         for t in t {

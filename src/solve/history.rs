@@ -103,9 +103,9 @@ impl SolutionHistory {
         (self.len, self.next, self.skipped, self.backoff) = (0, 0, 0, 0);
         for buffer in [&mut self.corrections, &mut self.products] {
             buffer.clear();
-            buffer.resize(MOST_KEPT * n, 0.0);
+            crate::resize_with_room(buffer, MOST_KEPT * n, 0.0);
         }
-        self.start.resize(n, 0.0);
+        crate::resize_with_room(&mut self.start, n, 0.0);
         self.partial.resize(n.div_ceil(CHUNK) * sums_len(self.capacity), 0.0);
     }
 
