@@ -76,22 +76,18 @@ const DIAMETER_TASK: usize = 8192;
 /// every element's node list in memory.
 pub fn node_diameters(mesh: &PolyMesh) -> Vec<f64> {
     let n = mesh.nodes.len();
-    let raised = |e: std::ops::Range<usize>| {
-        let mut out = vec![0.0; n];
-        e.for_each(|e| raise(mesh, e, &mut out));
+    let raised = |mut out: Vec<f64>, e: usize| {
+        raise(mesh, e, &mut out);
         out
     };
-    let runs: Vec<std::ops::Range<usize>> = (0..mesh.elements.len())
-        .step_by(DIAMETER_TASK)
-        .map(|first| first..(first + DIAMETER_TASK).min(mesh.elements.len()))
-        .collect();
-    runs.into_par_iter().map(raised).reduce(
-        || vec![0.0; n],
-        |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(a, b)| *a = a.max(b));
-            a
-        },
-    )
+    let larger = |mut a: Vec<f64>, b: Vec<f64>| {
+        a.iter_mut().zip(b).for_each(|(a, b)| *a = a.max(b));
+        a
+    };
+    (0..mesh.elements.len())
+        .into_par_iter()
+        .fold_chunks(DIAMETER_TASK, || vec![0.0; n], raised)
+        .reduce(|| vec![0.0; n], larger)
 }
 
 /// Raises `diameters` (see [`node_diameters`]) to the diameters of the
