@@ -69,7 +69,8 @@ const FLIPPED: u32 = 1 << 31;
 /// The scratch of one element's evaluation, from the caller's stack (see
 /// [`evaluate_scratch`]): the edges of its surface triangles, each
 /// unordered vertex pair once (`ends`, in the direction of its first
-/// triangle; `table` maps a directed pair to its edge), per triangle its
+/// triangle, numbered through a `k x k` table of directed pairs that
+/// [`Work::new`] keeps only while it lists them), per triangle its
 /// arcs `b→c`, `c→a`, `a→b` as edge numbers ([`FLIPPED`] set where the arc
 /// runs against its edge); and the per-point arrays: `u`, `d`, `w` per
 /// vertex (`w` the output of [`weights`]), `normals`, `angles` per edge.
