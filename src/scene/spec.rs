@@ -406,6 +406,10 @@ pub enum SolverName {
     Cholesky,
     /// `"sparse-cholesky"`: the sparse supernodal factorisation at every size.
     SparseCholesky,
+    /// `"lagged-cholesky"`: the sparse supernodal factor kept across steps
+    /// as the preconditioner of CG, factored again when the matrix has
+    /// drifted from it (the envelope factorisation for small systems).
+    LaggedCholesky,
     /// `"cg"`: conjugate gradients preconditioned by block Jacobi plus a
     /// coarse correction (the rigid motions of aggregates of nodes).
     Cg,
@@ -420,6 +424,7 @@ impl SolverName {
             SolverName::Auto => SolverKind::Auto,
             SolverName::Cholesky => SolverKind::Cholesky,
             SolverName::SparseCholesky => SolverKind::SparseCholesky,
+            SolverName::LaggedCholesky => SolverKind::LaggedCholesky,
             SolverName::Cg => SolverKind::Cg,
             SolverName::CgRest => SolverKind::CgRest,
         }

@@ -68,6 +68,11 @@ impl Cholesky {
         self.par.unwrap_or(if unknowns >= PARALLEL_CHOLESKY_MIN_UNKNOWNS { Par::rayon(0) } else { Par::Seq })
     }
 
+    /// Whether a factor is ready (a pattern analysed, values factored).
+    pub fn is_factored(&self) -> bool {
+        self.factored
+    }
+
     /// Overwrites `x` with `A⁻¹ x` for the last factored `A` (in parallel
     /// over the current rayon pool for a large factor, see module docs).
     pub fn solve_in_place(&mut self, x: &mut [f64]) -> Result<(), SolveError> {
@@ -246,13 +251,13 @@ fn nested_dissection(pattern: SymbolicSparseColMatRef<'_, usize>) -> Option<(Vec
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use faer::sparse::SymbolicSparseColMat;
 
     /// The stiffness of a box of `cells` tetrahedral cells plus `10³ I`
     /// (a regular matrix with large supernodes), and a right-hand side.
-    fn box_system(cells: usize) -> (crate::assembly::SparsePattern, Vec<f64>, Vec<f64>) {
+    pub(crate) fn box_system(cells: usize) -> (crate::assembly::SparsePattern, Vec<f64>, Vec<f64>) {
         use crate::assembly::SparsePattern;
         use crate::store::{BasisOptions, ElementStore};
         let mesh = crate::meshing::box_tet([0.0; 3], [1.0; 3], [cells; 3]).unwrap();

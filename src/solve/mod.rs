@@ -10,12 +10,14 @@ mod cholesky;
 mod coarse;
 mod envelope;
 mod history;
+mod lagged;
 mod ordering;
 mod tree_solve;
 
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
 pub use cholesky::{Cholesky, PARALLEL_CHOLESKY_MIN_UNKNOWNS};
 pub use envelope::EnvelopeCholesky;
+pub use lagged::{LaggedCholesky, ENERGY_TOLERANCE, MAX_LAGGED_ITERATIONS, REFACTOR_AFTER};
 pub(crate) use ordering::{component_roots, reverse_cuthill_mckee};
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -136,6 +138,12 @@ pub enum SolverKind {
     /// The sparse supernodal Cholesky at every size (the large-system path
     /// of [`SolverKind::Cholesky`], to compare against).
     SparseCholesky,
+    /// The sparse supernodal Cholesky whose factor is kept across steps as
+    /// the preconditioner of conjugate gradients, and renewed only when
+    /// the matrix has drifted from it ([`LaggedCholesky`]); the envelope
+    /// factorisation, refactorised every step, up to
+    /// [`ENVELOPE_MAX_UNKNOWNS`] unknowns.
+    LaggedCholesky,
     /// Conjugate gradients preconditioned by block Jacobi plus a coarse
     /// correction (the rigid motions of aggregates of nodes),
     /// warm-started.
@@ -166,6 +174,8 @@ pub enum SolverChoice {
     Envelope,
     /// [`Cholesky`].
     Sparse,
+    /// [`LaggedCholesky`].
+    Lagged,
     /// [`ConjugateGradient`] with block Jacobi and the coarse level.
     Cg,
     /// [`ConjugateGradient`] with the rotated rest-state factor.
@@ -176,9 +186,14 @@ impl SolverChoice {
     /// The solver for `unknowns` scalar unknowns of `kind`.
     pub fn of(kind: SolverKind, unknowns: usize) -> Self {
         match kind {
-            SolverKind::Auto | SolverKind::Cholesky if unknowns <= ENVELOPE_MAX_UNKNOWNS => SolverChoice::Envelope,
+            SolverKind::Auto | SolverKind::Cholesky | SolverKind::LaggedCholesky
+                if unknowns <= ENVELOPE_MAX_UNKNOWNS =>
+            {
+                SolverChoice::Envelope
+            }
             SolverKind::Auto if unknowns <= AUTO_CHOLESKY_MAX_UNKNOWNS => SolverChoice::Sparse,
             SolverKind::Cholesky | SolverKind::SparseCholesky => SolverChoice::Sparse,
+            SolverKind::LaggedCholesky => SolverChoice::Lagged,
             SolverKind::Auto | SolverKind::Cg => SolverChoice::Cg,
             SolverKind::CgRest => SolverChoice::CgRest,
         }
@@ -191,6 +206,7 @@ pub fn make_solver(kind: SolverKind, unknowns: usize, tolerance: f64, max_iterat
     match SolverChoice::of(kind, unknowns) {
         SolverChoice::Envelope => Box::new(EnvelopeCholesky::default()),
         SolverChoice::Sparse => Box::new(Cholesky::default()),
+        SolverChoice::Lagged => Box::new(LaggedCholesky::default()),
         SolverChoice::Cg => Box::new(ConjugateGradient::new(tolerance, max_iterations)),
         SolverChoice::CgRest => Box::new(ConjugateGradient::new(tolerance, max_iterations).with_rest_preconditioner()),
     }
