@@ -17,7 +17,7 @@ mod tree_solve;
 pub use cg::{dot, symmetric_matvec, BlockStructure, ConjugateGradient};
 pub use cholesky::{Cholesky, PARALLEL_CHOLESKY_MIN_UNKNOWNS};
 pub use envelope::EnvelopeCholesky;
-pub use lagged::{LaggedCholesky, ENERGY_TOLERANCE, MAX_LAGGED_ITERATIONS, REFACTOR_AFTER};
+pub use lagged::{LaggedCholesky, ENERGY_TOLERANCE, MAX_BACKOFF, MAX_LAGGED_ITERATIONS, REFACTOR_AFTER};
 pub(crate) use ordering::{component_roots, reverse_cuthill_mckee};
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
