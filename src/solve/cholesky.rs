@@ -119,6 +119,27 @@ impl Cholesky {
             }
         }
     }
+
+    /// Floating-point operations of one numeric factorisation, once
+    /// analysed, as CHOLMOD counts them: `Σ_j c_j²` over the columns of `L`,
+    /// `c_j` the column's entries on and below the diagonal (a multiply and
+    /// an add each), so that a time gives the factorisation's flop rate.
+    pub fn factor_flops(&self) -> f64 {
+        let Some(sym) = self.symbolic.as_ref() else { return 0.0 };
+        match sym.raw() {
+            SymbolicCholeskyRaw::Simplicial(s) => s.col_ptr().windows(2).map(|w| ((w[1] - w[0]) as f64).powi(2)).sum(),
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                let rows = s.col_ptr_for_row_idx();
+                (0..s.n_supernodes())
+                    .map(|k| {
+                        let width = s.supernode_end()[k] - s.supernode_begin()[k];
+                        let below = rows[k + 1] - rows[k];
+                        (0..width).map(|c| ((width - c + below) as f64).powi(2)).sum::<f64>()
+                    })
+                    .sum()
+            }
+        }
+    }
 }
 
 impl LinearSolver for Cholesky {
