@@ -19,6 +19,14 @@
 //! both sides of every face: the discrete divergence theorem holds exactly
 //! and the patch test passes whatever the MFS error. Masses are lumped by
 //! row scaling of the consistent mass (HRZ), which keeps them positive.
+//!
+//! The collapsed rule of order 2 (8 points per sub-tetrahedron) is exact
+//! for degree 1 only, yet the symmetric 4-point rule of degree 2 does
+//! worse where it matters: on the box of the harmonic tests its `K_e` lies
+//! nearer the trilinear one (4.8e-2 against 5.8e-2) but the lumped masses
+//! move three times as far from 1/8 (1.0e-3 against 3.5e-4), the products
+//! `N_a N_b` being far from quadratic. It would take a fifth off a 24-node
+//! element's build (2 cores, AMD EPYC Zen 3: 1.53 against 1.85 ms).
 
 mod congruence;
 mod element;
