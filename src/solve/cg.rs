@@ -72,10 +72,11 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 ///
 /// What limits the iterations is the fine level and the unsmoothed
 /// aggregates, not the balance or exactness of the coarse one: on the
-/// clamped steps, solving the aggregates' system exactly (a limit of
-/// 800, above its 687 aggregates) took as many iterations as the limit of 66, and weighing
-/// block Jacobi's share by 0.6 to 1.7 gave 51.6 to 54.5 iterations per step
-/// against 52.0 (12 steps at 1e-6, 2 cores, AMD EPYC Zen 3).
+/// clamped steps, solving the aggregates' system exactly (a limit of 800,
+/// above its 687 aggregates) took as many iterations as the limit of 66,
+/// and weighing block Jacobi's share by 0.6 to 1.7 gave 51.6 to 54.5
+/// iterations per step against 52.0 (12 steps at 1e-6, 2 cores, AMD EPYC
+/// Zen 3).
 pub struct ConjugateGradient {
     /// Relative residual `|b - A x| / |b|` to reach.
     pub tolerance: f64,
