@@ -11,8 +11,9 @@
 //! computed row by row as `y_i = (column i) · x`, in parallel without
 //! write conflicts, reading the pattern's 3x3 block structure (one 32-bit
 //! block row index per 9 values instead of a 64-bit index per value) and
-//! the values rounded to `f32`: this memory-bound product reads a quarter
-//! of the bytes of a scalar `f64` one. The iteration's vectors stay `f64`,
+//! the values rounded to `f32`: this product, bound by its memory traffic
+//! and, at `f32`, partly by its gathers and sums, reads a quarter of the
+//! bytes of a scalar `f64` one. The iteration's vectors stay `f64`,
 //! and the residual it must meet is taken with the `f64` values (see
 //! [`ConjugateGradient::solve`]). One pass per iteration updates `x` and
 //! `r`, applies the preconditioner and forms both dot products; the product
