@@ -14,6 +14,9 @@
 //!   the element pass the patch test exactly whatever the points.
 //! - [`reference_rule`]: tensor Gauss–Legendre on the Duffy-collapsed
 //!   sub-tetrahedra `(c, f)`, `n^3` points each, for tests.
+//! - [`cone_rule`] and [`cone_rule_degree2`]: the collapsed rule, or the
+//!   symmetric 4-point rule of degree 2, on the sub-tetrahedra from any
+//!   apex that sees the whole surface (the harmonic elements' rules).
 //!
 //! Units: positions in m, weights in m^3.
 
@@ -188,6 +191,39 @@ pub fn cone_rule(
     }
 }
 
+/// Barycentric coordinate of the symmetric 4-point tetrahedral rule
+/// (Hammer–Marlowe–Stroud): each point is `a` of one vertex and `b` of the
+/// other three, `a = (5 + 3√5) / 20`, `b = (5 - √5) / 20`.
+const DEGREE2_A: f64 = 0.585_410_196_624_968_5;
+const DEGREE2_B: f64 = 0.138_196_601_125_010_5;
+
+/// The symmetric 4-point rule of degree 2 (weights `V / 4`, every point
+/// strictly inside) on every sub-tetrahedron `(apex, A, B, C)` of the
+/// surface triangles, appended to `points`, `weights`: exact for quadratic
+/// polynomials with half the points of the collapsed rule of [`cone_rule`]
+/// with `n = 2` (which is exact for degree 1 only). The weights take the
+/// sign of each sub-tetrahedron, as [`cone_rule`]'s do.
+pub fn cone_rule_degree2(
+    vertices: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    apex: [f64; 3],
+    points: &mut Vec<[f64; 3]>,
+    weights: &mut Vec<f64>,
+) {
+    for t in triangles {
+        let corners = [apex, vertices[t[0] as usize], vertices[t[1] as usize], vertices[t[2] as usize]];
+        let quarter = 0.25 * signed_volume(corners[0], corners[1], corners[2], corners[3]);
+        for heavy in 0..4 {
+            let p = corners
+                .iter()
+                .enumerate()
+                .fold([0.0; 3], |p, (i, &c)| add(p, scale(c, if i == heavy { DEGREE2_A } else { DEGREE2_B })));
+            points.push(p);
+            weights.push(quarter);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -233,5 +269,24 @@ mod tests {
         // ∫ x^2 y z over the unit cube = 1/12
         let got: f64 = p.iter().zip(&w).map(|(p, w)| w * p[0] * p[0] * p[1] * p[2]).sum();
         assert!((got - 1.0 / 12.0).abs() < 1e-14, "{got}");
+    }
+
+    /// The 4-point rule integrates every monomial of degree 2 exactly over
+    /// the unit cube from an off-centre apex, and not every one of degree 3.
+    #[test]
+    fn degree2_cone_rule_is_exact_for_quadratics_only() {
+        let (v, t) = cube();
+        let (mut p, mut w) = (Vec::new(), Vec::new());
+        cone_rule_degree2(&v, &t, [0.3, 0.6, 0.45], &mut p, &mut w);
+        assert_eq!(p.len(), 4 * t.len());
+        let integral = |f: &dyn Fn([f64; 3]) -> f64| p.iter().zip(&w).map(|(&x, w)| w * f(x)).sum::<f64>();
+        // ∫ x^i y^j z^l over the unit cube = 1 / ((i+1)(j+1)(l+1))
+        for (i, j, l) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (2, 0, 0), (0, 2, 0), (1, 1, 0), (0, 1, 1), (1, 0, 1)] {
+            let got = integral(&|x| x[0].powi(i) * x[1].powi(j) * x[2].powi(l));
+            let want = 1.0 / ((i + 1) * (j + 1) * (l + 1)) as f64;
+            assert!((got - want).abs() < 1e-14, "x^{i} y^{j} z^{l}: {got} against {want}");
+        }
+        let cubic = integral(&|x| x[0].powi(3));
+        assert!((cubic - 0.25).abs() > 1e-6, "degree 3 is not exact: {cubic}");
     }
 }

@@ -71,7 +71,12 @@ fn check_reproduction(mesh: &PolyMesh, b: &ElementBasis, pts: &[[f64; 3]]) -> Re
     evaluate(&b.functions(), pts, &mut phi, &mut grad, MemStack::new(&mut buf));
     let size = mesh.element_diameter(0);
     let (mut phi_products, mut grad_products) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
-    b.evaluate(pts, &mut phi_products, &mut grad_products, &mut EvaluationWork::default());
+    let mut work = EvaluationWork::default();
+    b.evaluate(pts, &mut phi_products, &mut grad_products, &mut work);
+    let (mut phi_alone, mut grad_alone) = (vec![0.0; k * nq], vec![0.0; 3 * k * nq]);
+    b.values(pts, &mut phi_alone, &mut work);
+    b.gradients(pts, &mut grad_alone, &mut work);
+    prop_assert!(phi_alone == phi_products && grad_alone == grad_products, "values or gradients alone differ");
     let apart = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     prop_assert!(apart(&phi, &phi_products) < 1e-11, "values by products differ by {}", apart(&phi, &phi_products));
     prop_assert!(

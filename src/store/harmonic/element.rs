@@ -76,10 +76,35 @@ impl ElementBasis {
     /// about 0.2 ms where the point-by-point kernel took 0.53 ms (one core,
     /// AMD EPYC). `work` is the caller's, reused.
     pub fn evaluate(&self, points: &[[f64; 3]], phi: &mut [f64], grad: &mut [f64], work: &mut EvaluationWork) {
+        self.evaluate_parts(points, Some(phi), Some(grad), work);
+    }
+
+    /// The values alone of [`ElementBasis::evaluate`] (`phi[a * Q + q]`):
+    /// one kernel matrix and one product instead of four.
+    pub fn values(&self, points: &[[f64; 3]], phi: &mut [f64], work: &mut EvaluationWork) {
+        self.evaluate_parts(points, Some(phi), None, work);
+    }
+
+    /// The gradients alone of [`ElementBasis::evaluate`]
+    /// (`grad[(3 a + i) * Q + q]`).
+    pub fn gradients(&self, points: &[[f64; 3]], grad: &mut [f64], work: &mut EvaluationWork) {
+        self.evaluate_parts(points, None, Some(grad), work);
+    }
+
+    /// [`ElementBasis::evaluate`] of the values, the gradients or both.
+    fn evaluate_parts(
+        &self,
+        points: &[[f64; 3]],
+        mut phi: Option<&mut [f64]>,
+        mut grad: Option<&mut [f64]>,
+        work: &mut EvaluationWork,
+    ) {
         let (n, k, nq) = (self.centres.len(), self.linear.len(), points.len());
-        assert!(phi.len() == k * nq && grad.len() == 3 * k * nq, "phi holds k Q values, grad 3 k Q");
+        assert!(phi.as_ref().is_none_or(|phi| phi.len() == k * nq), "phi holds k Q values");
+        assert!(grad.as_ref().is_none_or(|grad| grad.len() == 3 * k * nq), "grad holds 3 k Q values");
         let weights = MatRef::from_row_major_slice(&self.weights, n, k);
         work.matrices.resize(4 * POINT_RUN * n, 0.0);
+        work.ones.resize(POINT_RUN, 1.0);
         for first in (0..nq).step_by(POINT_RUN) {
             let run = POINT_RUN.min(nq - first);
             for (d, coords) in work.coords.iter_mut().enumerate() {
@@ -93,8 +118,12 @@ impl ElementBasis {
             let (gy, gz) = rest.split_at_mut(POINT_RUN * n);
             for (j, &c) in self.centres.iter().enumerate() {
                 let at = j * POINT_RUN..j * POINT_RUN + run;
-                let gradient = [&mut gx[at.clone()], &mut gy[at.clone()], &mut gz[at.clone()]];
-                harmonic::kernel_columns_with_gradient(coords, c, &mut value[at.clone()], gradient);
+                if grad.is_some() {
+                    let gradient = [&mut gx[at.clone()], &mut gy[at.clone()], &mut gz[at.clone()]];
+                    harmonic::kernel_columns_with_gradient(coords, c, &mut value[at.clone()], gradient);
+                } else {
+                    harmonic::kernel_column(coords, c, &work.ones[..run], &mut value[at]);
+                }
             }
             // out (run x k, columns `stride` apart) = kernel (run x n) W
             let product = |out: &mut [f64], stride: usize, kernel: &[f64]| {
@@ -102,18 +131,26 @@ impl ElementBasis {
                 let kernel = MatRef::from_column_major_slice_with_stride(kernel, run, n, POINT_RUN);
                 matmul(out, Accum::Replace, kernel, weights, 1.0, Par::Seq);
             };
-            product(&mut phi[first..], nq, value);
-            for (d, kernel) in [&*gx, &*gy, &*gz].into_iter().enumerate() {
-                product(&mut grad[d * nq + first..], 3 * nq, kernel);
+            if let Some(phi) = phi.as_deref_mut() {
+                product(&mut phi[first..], nq, value);
+            }
+            if let Some(grad) = grad.as_deref_mut() {
+                for (d, kernel) in [&*gx, &*gy, &*gz].into_iter().enumerate() {
+                    product(&mut grad[d * nq + first..], 3 * nq, kernel);
+                }
             }
         }
         for (a, l) in self.linear.iter().enumerate() {
-            for (q, p) in points.iter().enumerate() {
-                let x = sub(*p, self.origin);
-                phi[a * nq + q] += l[0] * x[0] + l[1] * x[1] + l[2] * x[2] + l[3];
+            if let Some(phi) = phi.as_deref_mut() {
+                for (q, p) in points.iter().enumerate() {
+                    let x = sub(*p, self.origin);
+                    phi[a * nq + q] += l[0] * x[0] + l[1] * x[1] + l[2] * x[2] + l[3];
+                }
             }
-            for (i, g) in grad[3 * a * nq..3 * (a + 1) * nq].chunks_exact_mut(nq).enumerate() {
-                g.iter_mut().for_each(|g| *g += l[i]);
+            if let Some(grad) = grad.as_deref_mut() {
+                for (i, g) in grad[3 * a * nq..3 * (a + 1) * nq].chunks_exact_mut(nq).enumerate() {
+                    g.iter_mut().for_each(|g| *g += l[i]);
+                }
             }
         }
     }
@@ -129,6 +166,8 @@ pub const POINT_RUN: usize = 64;
 pub struct EvaluationWork {
     matrices: Vec<f64>,
     coords: [Vec<f64>; 3],
+    /// Unit row weights of the value-only kernel columns.
+    ones: Vec<f64>,
 }
 
 /// Generalised winding number of the closed surface `triangles` around `p`

@@ -5,8 +5,11 @@
 //!
 //! Integration: the element is split into the sub-tetrahedra from a point
 //! that sees its whole boundary (a star point; found for convex and
-//! star-shaped non-convex elements), each integrated by a collapsed Gauss
-//! rule of `quadrature_order^3` points. An element with no star point is
+//! star-shaped non-convex elements), and each sub-tetrahedron carries two
+//! rules: a collapsed Gauss rule of `quadrature_order^3` points for the
+//! consistent mass the lumped masses come from, and for the stiffness the
+//! symmetric 4-point rule of degree 2 (or, for `quadrature_order` 3 and up,
+//! the mass rule). An element with no star point is
 //! first cut by a grid of half its diameter into the exact pieces
 //! `element ∩ box` (the grid slicer of [`crate::meshing::grid_slice`]),
 //! finer where a piece is still not star-shaped (three levels): every
@@ -20,13 +23,16 @@
 //! and the patch test passes whatever the MFS error. Masses are lumped by
 //! row scaling of the consistent mass (HRZ), which keeps them positive.
 //!
-//! The collapsed rule of order 2 (8 points per sub-tetrahedron) is exact
-//! for degree 1 only, yet the symmetric 4-point rule of degree 2 does
-//! worse where it matters: on the box of the harmonic tests its `K_e` lies
-//! nearer the trilinear one (4.8e-2 against 5.8e-2) but the lumped masses
-//! move three times as far from 1/8 (1.0e-3 against 3.5e-4), the products
-//! `N_a N_b` being far from quadratic. It would take a fifth off a 24-node
-//! element's build (2 cores, AMD EPYC Zen 3: 1.53 against 1.85 ms).
+//! Why two rules: the 8-point collapsed rule (order 2) is exact for
+//! degree 1 only, the 4-point rule for degree 2. For `K_e` the 4-point
+//! rule is the better one at half the points: on the box of the harmonic
+//! tests its `K_e` lies nearer the trilinear one (4.8e-2 against 5.8e-2).
+//! For the lumped masses it is worse, the products `N_a N_b` being far from
+//! quadratic: they move three times as far from 1/8 (1.0e-3 against
+//! 3.5e-4), so the masses keep the 8-point rule, for which only the values
+//! (one kernel matrix, not four) are evaluated. A 24-node element's build
+//! takes a tenth less than with the 8-point rule for both (one core, AMD
+//! EPYC Zen 3: 3.25 against 3.6 ms).
 
 mod congruence;
 mod element;
@@ -34,7 +40,7 @@ mod face;
 mod mfs;
 
 use crate::param::ParamError;
-use cleave_kernels::quadrature::{cone_rule, shift_gradients, volume_centroid};
+use cleave_kernels::quadrature::{cone_rule, cone_rule_degree2, shift_gradients, volume_centroid};
 use cleave_kernels::tet::signed_volume;
 use cleave_kernels::{elasticity, vec3};
 use rayon::prelude::*;
@@ -58,8 +64,10 @@ pub struct HarmonicOptions {
     /// Kernel samples inside every edge (3; the collocation points are
     /// 2.5 times as dense on elements, three times on faces).
     pub edge_samples: usize,
-    /// Gauss points per direction on each sub-tetrahedron (2: exact for
-    /// degree 1; 3: degree 3).
+    /// Gauss points per direction of the collapsed rule on each
+    /// sub-tetrahedron (2: exact for degree 1; 3: degree 3): the masses'
+    /// rule, and from 3 up the stiffness's too (1 and 2 give the stiffness
+    /// the 4-point rule of degree 2; see the module docs).
     pub quadrature_order: usize,
     /// Whether hexahedra use the closed-form trilinear basis (true) or are
     /// fitted like every other element (false: a reference for tests).
@@ -172,16 +180,14 @@ fn star_point_clear_by(
 /// by a grid twice as fine.
 const SLICE_LEVELS: usize = 3;
 
-/// Adds the cone rules of the pieces of the closed surface `surface` cut
-/// by a grid of cell `cell` (m), slicing again where a piece has no star
-/// point; false where that fails `levels` deep.
-fn sliced_rule(
+/// Calls `cone(vertices, triangles, apex)` for every piece of the closed
+/// surface `surface` cut by a grid of cell `cell` (m), slicing again where
+/// a piece has no star point; false where that fails `levels` deep.
+fn sliced_cones(
     surface: &crate::io::Surface,
     cell: f64,
-    order: usize,
     levels: usize,
-    points: &mut Vec<[f64; 3]>,
-    weights: &mut Vec<f64>,
+    cone: &mut impl FnMut(&[[f64; 3]], &[[u32; 3]], [f64; 3]),
 ) -> bool {
     let Ok((pieces, _)) =
         crate::meshing::grid_slice(surface, cell, &crate::meshing::SliceOptions { merge_below: 0.0, simplify: 0.0 })
@@ -202,52 +208,71 @@ fn sliced_rule(
         let centroid = Some(pieces.element_centroid(e)).filter(|_| levels == 0 || pieces.is_convex(e, 0.0));
         match star_point_clear_by(&verts, &triangles, pieces.element_diameter(e), 1e-6).or(centroid) {
             Some(apex) => {
-                cone_rule(&verts, &triangles, apex, order, points, weights);
+                cone(&verts, &triangles, apex);
                 true
             }
             None => {
                 levels > 0
-                    && sliced_rule(
-                        &crate::io::Surface { vertices: verts, triangles },
-                        0.5 * cell,
-                        order,
-                        levels - 1,
-                        points,
-                        weights,
-                    )
+                    && sliced_cones(&crate::io::Surface { vertices: verts, triangles }, 0.5 * cell, levels - 1, cone)
             }
         }
     })
 }
 
-/// The quadrature rule of an element from its vertices and outward
+/// A quadrature rule: points (m) and weights (m³).
+pub type Rule = (Vec<[f64; 3]>, Vec<f64>);
+
+/// The two quadrature rules of a harmonic element, on the same
+/// sub-tetrahedra (see the module docs).
+#[derive(Clone, Debug)]
+pub struct ElementRules {
+    /// The collapsed rule of `quadrature_order³` points per
+    /// sub-tetrahedron, for the consistent mass the lumped masses come
+    /// from.
+    pub mass: Rule,
+    /// The rule of the stiffness: the 4-point rule of degree 2 per
+    /// sub-tetrahedron for `quadrature_order` 1 or 2, else the mass rule's.
+    pub stiffness: Rule,
+}
+
+/// The quadrature rules of an element from its vertices and outward
 /// triangles (see the module docs); `None` if no slicing gives pieces with
 /// star points.
-pub fn element_rule(
+pub fn element_rules(
     verts: &[[f64; 3]],
     triangles: &[[u32; 3]],
     diameter: f64,
     order: usize,
-) -> Option<(Vec<[f64; 3]>, Vec<f64>)> {
-    let (mut points, mut weights) = (Vec::new(), Vec::new());
+) -> Option<ElementRules> {
+    let (mut mass, mut stiffness): (Rule, Rule) = Default::default();
+    let mut cone = |verts: &[[f64; 3]], triangles: &[[u32; 3]], apex: [f64; 3]| {
+        cone_rule(verts, triangles, apex, order, &mut mass.0, &mut mass.1);
+        if order <= 2 {
+            cone_rule_degree2(verts, triangles, apex, &mut stiffness.0, &mut stiffness.1);
+        }
+    };
     match star_point(verts, triangles, diameter) {
-        Some(apex) => cone_rule(verts, triangles, apex, order, &mut points, &mut weights),
+        Some(apex) => cone(verts, triangles, apex),
         None => {
             let surface = crate::io::Surface { vertices: verts.to_vec(), triangles: triangles.to_vec() };
-            if !sliced_rule(&surface, 0.5 * diameter, order, SLICE_LEVELS, &mut points, &mut weights) {
+            if !sliced_cones(&surface, 0.5 * diameter, SLICE_LEVELS, &mut cone) {
                 return None;
             }
         }
     }
-    Some((points, weights))
+    if order > 2 {
+        stiffness = mass.clone();
+    }
+    Some(ElementRules { mass, stiffness })
 }
-
-/// A quadrature rule: points (m) and weights (m³).
-type Rule = (Vec<[f64; 3]>, Vec<f64>);
 
 /// Per-thread scratch of the batch build.
 struct Scratch {
+    /// The mass rule's points, moved with the element.
+    mass_points: Vec<[f64; 3]>,
+    /// Values at the mass rule's points.
     phi: Vec<f64>,
+    /// Gradients at the stiffness rule's points.
     grad: Vec<f64>,
     gram: Vec<f64>,
     moments: Vec<[f64; 3]>,
@@ -278,7 +303,7 @@ pub(super) fn build_batch(
     // with copies too, while an element of a shape of its own is fitted
     // when its slots are filled (so that no more fits are held at once
     // than there are threads: a 24-node fit is about 50 kB)
-    let fitted: Vec<(usize, Rule, Option<ElementBasis>)> = firsts
+    let fitted: Vec<(usize, ElementRules, Option<ElementBasis>)> = firsts
         .par_iter()
         .map(|&i| {
             let e = elements[i];
@@ -286,13 +311,13 @@ pub(super) fn build_batch(
             let verts: Vec<[f64; 3]> = el.nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
             let local = |g: u32| el.nodes.binary_search(&g).map(|i| i as u32).unwrap_or(0);
             let triangles: Vec<[u32; 3]> = mesh.element_triangles(e as usize).map(|t| t.map(local)).collect();
-            let rule = element_rule(&verts, &triangles, mesh.element_diameter(e as usize), options.quadrature_order)
+            let rules = element_rules(&verts, &triangles, mesh.element_diameter(e as usize), options.quadrature_order)
                 .ok_or(BasisError::NotStarShaped { element: e as usize })?;
             let fit = || {
                 element_basis(mesh, e as usize, faces, options).ok_or(BasisError::HarmonicFit { element: e as usize })
             };
             let basis = if copies[i] > 1 { Some(fit()?) } else { None };
-            Ok((i, rule, basis))
+            Ok((i, rules, basis))
         })
         .collect::<Result<_, BasisError>>()?;
     // where in `fitted` the template of each batch element is
@@ -300,9 +325,10 @@ pub(super) fn build_batch(
     fitted.iter().enumerate().for_each(|(t, f)| fit_of[f.0] = t);
     let elements_of_batch = elements.clone();
     let index_of: HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
-    let nq = fitted.iter().map(|f| f.1 .0.len()).max().unwrap_or(0);
+    let nq = fitted.iter().map(|f| f.1.stiffness.0.len()).max().unwrap_or(0);
     let scratch = || Scratch {
-        phi: vec![0.0; k * nq],
+        mass_points: Vec::new(),
+        phi: Vec::new(),
         grad: vec![0.0; 3 * k * nq],
         gram: vec![0.0; elasticity::stiffness_scratch_len(k, nq)],
         moments: vec![[0.0; 3]; k],
@@ -312,7 +338,8 @@ pub(super) fn build_batch(
         let Slots { element, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
         let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
         let i = index_of[&(element as u32)];
-        let (first, (rule_points, rule_weights), fit) = &fitted[fit_of[template[i]]];
+        let (first, rules, fit) = &fitted[fit_of[template[i]]];
+        let (rule_points, rule_weights) = &rules.stiffness;
         let shift = congruence::offset(mesh, elements_of_batch[*first], element as u32);
         let m = rule_points.len();
         for (p, q) in points[..m].iter_mut().zip(rule_points) {
@@ -331,13 +358,20 @@ pub(super) fn build_batch(
             Some(fit) => fit.translated(shift),
             None => element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?,
         };
-        basis.evaluate(points, &mut s.phi, &mut s.grad, &mut s.evaluation);
+        basis.gradients(points, &mut s.grad, &mut s.evaluation);
         boundary_moments(mesh, element, faces, &mut s.moments);
         shift_gradients(weights, &mut s.grad, &s.moments);
         elasticity::element_stiffness(&s.grad, weights, k, lambda, mu, &mut s.gram, stiffness);
-        // HRZ lumping: diagonal of the consistent mass, rescaled to sum 1
+        // HRZ lumping: diagonal of the consistent mass (by the mass rule),
+        // rescaled to sum 1
+        let (mass_points, mass_weights) = &rules.mass;
+        s.mass_points.clear();
+        s.mass_points.extend(mass_points.iter().map(|q| vec3::add(*q, shift)));
+        let nm = mass_points.len();
+        s.phi.resize(k * nm, 0.0);
+        basis.values(&s.mass_points, &mut s.phi, &mut s.evaluation);
         for (a, m) in mass_fraction.iter_mut().enumerate() {
-            *m = s.phi[a * nq..(a + 1) * nq].iter().zip(weights.iter()).map(|(p, w)| p * p * w).sum();
+            *m = s.phi[a * nm..(a + 1) * nm].iter().zip(mass_weights).map(|(p, w)| p * p * w).sum();
         }
         let total: f64 = mass_fraction.iter().sum();
         mass_fraction.iter_mut().for_each(|m| *m /= total);
