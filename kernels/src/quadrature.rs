@@ -281,7 +281,9 @@ mod tests {
         assert_eq!(p.len(), 4 * t.len());
         let integral = |f: &dyn Fn([f64; 3]) -> f64| p.iter().zip(&w).map(|(&x, w)| w * f(x)).sum::<f64>();
         // ∫ x^i y^j z^l over the unit cube = 1 / ((i+1)(j+1)(l+1))
-        for (i, j, l) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (2, 0, 0), (0, 2, 0), (1, 1, 0), (0, 1, 1), (1, 0, 1)] {
+        for (i, j, l) in
+            [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (2, 0, 0), (0, 2, 0), (1, 1, 0), (0, 1, 1), (1, 0, 1)]
+        {
             let got = integral(&|x| x[0].powi(i) * x[1].powi(j) * x[2].powi(l));
             let want = 1.0 / ((i + 1) * (j + 1) * (l + 1)) as f64;
             assert!((got - want).abs() < 1e-14, "x^{i} y^{j} z^{l}: {got} against {want}");

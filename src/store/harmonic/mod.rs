@@ -238,12 +238,7 @@ pub struct ElementRules {
 /// The quadrature rules of an element from its vertices and outward
 /// triangles (see the module docs); `None` if no slicing gives pieces with
 /// star points.
-pub fn element_rules(
-    verts: &[[f64; 3]],
-    triangles: &[[u32; 3]],
-    diameter: f64,
-    order: usize,
-) -> Option<ElementRules> {
+pub fn element_rules(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64, order: usize) -> Option<ElementRules> {
     let (mut mass, mut stiffness): (Rule, Rule) = Default::default();
     let mut cone = |verts: &[[f64; 3]], triangles: &[[u32; 3]], apex: [f64; 3]| {
         cone_rule(verts, triangles, apex, order, &mut mass.0, &mut mass.1);
