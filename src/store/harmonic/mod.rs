@@ -61,8 +61,9 @@ pub struct HarmonicOptions {
     /// Offset `ξ` of the kernel centres outside the boundary, relative to
     /// the element (or face) diameter (martin2008 eq. 12; 0.1).
     pub offset: f64,
-    /// Kernel samples inside every edge (3; the collocation points are
-    /// 2.5 times as dense on elements, three times on faces).
+    /// Kernel samples inside every edge (3; an element's collocation points
+    /// are 1.75 times as dense along its edges and 2.5 times along each
+    /// direction of its faces, a face function's three times).
     pub edge_samples: usize,
     /// Gauss points per direction of the collapsed rule on each
     /// sub-tetrahedron (2: exact for degree 1; 3: degree 3): the masses'
