@@ -578,6 +578,7 @@ fn large_cut_measurements(label: &str, mesh: PolyMesh) -> Result<Vec<Measurement
                        cut: &mut dyn FnMut(&mut Simulation, usize) -> Result<usize, Error>|
      -> Result<(), Error> {
         let (mut ms, mut crossed, retries_before) = (0.0, 0, sim.cut_retries());
+        let phases_before = *sim.timings();
         for i in 0..cuts {
             let t = Instant::now();
             crossed += cut(sim, i)?;
@@ -587,15 +588,31 @@ fn large_cut_measurements(label: &str, mesh: PolyMesh) -> Result<Vec<Measurement
         // costs about twice a first try: the mean includes it)
         let retried = sim.cut_retries() - retries_before;
         let (ne, nn) = (sim.mesh().elements.len(), sim.mesh().nodes.len());
-        rows.push(Measurement {
-            name: format!("{name}, {retried} {} in {cuts} cuts", if retried == 1 { "retry" } else { "retries" }),
+        let row = |name: String, ms: f64, extra| Measurement {
+            name,
             mesh: label.into(),
             elements: ne,
             nodes: nn,
             ms: ms / cuts as f64,
             elements_per_s: crossed as f64 / (ms * 1e-3),
-            extra: Some(("crossed per cut".into(), crossed as f64 / cuts as f64)),
-        });
+            extra,
+        };
+        let per_cut = ("crossed per cut".to_string(), crossed as f64 / cuts as f64);
+        let retries = format!("{retried} {} in {cuts} cuts", if retried == 1 { "retry" } else { "retries" });
+        rows.push(row(format!("{name}, {retries}"), ms, Some(per_cut)));
+        // where a cut's time goes, as the simulation books it: the split
+        // and its bookkeeping (rollback, checks, node states, masses and
+        // rotations), the touched elements' data, the pattern's update,
+        // and the solver's analysis of the new pattern
+        let (after, before) = (sim.timings(), phases_before);
+        for (phase, seconds) in [
+            ("split and bookkeeping", after.topology - before.topology),
+            ("element data", after.basis - before.basis),
+            ("pattern update", after.assembly - before.assembly),
+            ("solver analysis", after.solve - before.solve),
+        ] {
+            rows.push(row(format!("{name}: {phase}"), seconds * 1e3, None));
+        }
         Ok(())
     };
     measure(&mut sim, "blade cut (to ready)", 6, &mut |sim, i| {
