@@ -238,10 +238,7 @@ impl Renumbering {
             });
         let kept = extended.is_some();
         match extended {
-            Some(order) => {
-                self.order.clear();
-                self.order.extend_from_slice(&order);
-            }
+            Some(order) => self.order = order,
             None => {
                 let order = reverse_cuthill_mckee(n, |v| old.column_rows(v).iter().map(|&r| r as usize));
                 self.rank_by(&order);
