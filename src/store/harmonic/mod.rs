@@ -232,19 +232,27 @@ pub struct ElementRules {
     /// from.
     pub mass: Rule,
     /// The rule of the stiffness: the 4-point rule of degree 2 per
-    /// sub-tetrahedron for `quadrature_order` 1 or 2, else the mass rule's.
-    pub stiffness: Rule,
+    /// sub-tetrahedron for `quadrature_order` 1 or 2; `None` from 3 up,
+    /// where the mass rule serves both (see [`ElementRules::stiffness`]).
+    pub degree2: Option<Rule>,
+}
+
+impl ElementRules {
+    /// The stiffness's rule: the 4-point rule, or the mass rule.
+    pub fn stiffness(&self) -> &Rule {
+        self.degree2.as_ref().unwrap_or(&self.mass)
+    }
 }
 
 /// The quadrature rules of an element from its vertices and outward
 /// triangles (see the module docs); `None` if no slicing gives pieces with
 /// star points.
 pub fn element_rules(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64, order: usize) -> Option<ElementRules> {
-    let (mut mass, mut stiffness): (Rule, Rule) = Default::default();
+    let (mut mass, mut degree2): (Rule, Option<Rule>) = (Default::default(), (order <= 2).then(Default::default));
     let mut cone = |verts: &[[f64; 3]], triangles: &[[u32; 3]], apex: [f64; 3]| {
         cone_rule(verts, triangles, apex, order, &mut mass.0, &mut mass.1);
-        if order <= 2 {
-            cone_rule_degree2(verts, triangles, apex, &mut stiffness.0, &mut stiffness.1);
+        if let Some((points, weights)) = degree2.as_mut() {
+            cone_rule_degree2(verts, triangles, apex, points, weights);
         }
     };
     match star_point(verts, triangles, diameter) {
@@ -256,10 +264,7 @@ pub fn element_rules(verts: &[[f64; 3]], triangles: &[[u32; 3]], diameter: f64, 
             }
         }
     }
-    if order > 2 {
-        stiffness = mass.clone();
-    }
-    Some(ElementRules { mass, stiffness })
+    Some(ElementRules { mass, degree2 })
 }
 
 /// Per-thread scratch of the batch build.
@@ -321,7 +326,7 @@ pub(super) fn build_batch(
     fitted.iter().enumerate().for_each(|(t, f)| fit_of[f.0] = t);
     let elements_of_batch = elements.clone();
     let index_of: HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
-    let nq = fitted.iter().map(|f| f.1.stiffness.0.len()).max().unwrap_or(0);
+    let nq = fitted.iter().map(|f| f.1.stiffness().0.len()).max().unwrap_or(0);
     let scratch = || Scratch {
         mass_points: Vec::new(),
         phi: Vec::new(),
@@ -335,7 +340,7 @@ pub(super) fn build_batch(
         let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
         let i = index_of[&(element as u32)];
         let (first, rules, fit) = &fitted[fit_of[template[i]]];
-        let (rule_points, rule_weights) = &rules.stiffness;
+        let (rule_points, rule_weights) = rules.stiffness();
         let shift = congruence::offset(mesh, elements_of_batch[*first], element as u32);
         let m = rule_points.len();
         for (p, q) in points[..m].iter_mut().zip(rule_points) {
@@ -354,20 +359,33 @@ pub(super) fn build_batch(
             Some(fit) => fit.translated(shift),
             None => element_basis(mesh, element, faces, options).ok_or(BasisError::HarmonicFit { element })?,
         };
-        basis.gradients(points, &mut s.grad, &mut s.evaluation);
+        // (one evaluation of both where one rule serves both)
+        match rules.degree2 {
+            Some(_) => basis.gradients(points, &mut s.grad, &mut s.evaluation),
+            None => {
+                s.phi.resize(k * nq, 0.0);
+                basis.evaluate(points, &mut s.phi, &mut s.grad, &mut s.evaluation);
+            }
+        }
         boundary_moments(mesh, element, faces, &mut s.moments);
         shift_gradients(weights, &mut s.grad, &s.moments);
         elasticity::element_stiffness(&s.grad, weights, k, lambda, mu, &mut s.gram, stiffness);
         // HRZ lumping: diagonal of the consistent mass (by the mass rule),
         // rescaled to sum 1
         let (mass_points, mass_weights) = &rules.mass;
-        s.mass_points.clear();
-        s.mass_points.extend(mass_points.iter().map(|q| vec3::add(*q, shift)));
-        let nm = mass_points.len();
-        s.phi.resize(k * nm, 0.0);
-        basis.values(&s.mass_points, &mut s.phi, &mut s.evaluation);
+        // (the values at the mass rule's points, `stride` apart per node)
+        let stride = match rules.degree2 {
+            Some(_) => {
+                s.mass_points.clear();
+                s.mass_points.extend(mass_points.iter().map(|q| vec3::add(*q, shift)));
+                s.phi.resize(k * mass_points.len(), 0.0);
+                basis.values(&s.mass_points, &mut s.phi, &mut s.evaluation);
+                mass_points.len()
+            }
+            None => nq,
+        };
         for (a, m) in mass_fraction.iter_mut().enumerate() {
-            *m = s.phi[a * nm..(a + 1) * nm].iter().zip(mass_weights).map(|(p, w)| p * p * w).sum();
+            *m = s.phi[a * stride..(a + 1) * stride].iter().zip(mass_weights).map(|(p, w)| p * p * w).sum();
         }
         let total: f64 = mass_fraction.iter().sum();
         mass_fraction.iter_mut().for_each(|m| *m /= total);
