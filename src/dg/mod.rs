@@ -28,8 +28,12 @@ pub struct DgElements {
     pub corotation: Corotation,
     /// Degree, flux and starting penalty.
     pub options: DgOptions,
-    /// The penalty `η` in use (doubled from the options' for `Ip`).
+    /// The penalty `η` in use (doubled from the options' for `Ip` by
+    /// [`DgElements::stabilise`]).
     pub penalty: f64,
+    /// Whether [`DgElements::stabilise`] checked the penalty since the
+    /// face terms were last rebuilt whole ([`DgElements::refresh`]).
+    stable: bool,
     /// Interior faces.
     pub interior: Vec<InteriorFace>,
     /// Boundary faces in fixed regions.
@@ -100,6 +104,7 @@ impl DgElements {
             corotation,
             options,
             penalty: options.penalty,
+            stable: false,
             interior: Vec::new(),
             boundary: Vec::new(),
             interior_blocks: Vec::new(),
@@ -144,9 +149,17 @@ impl DgElements {
     }
 
     /// Rebuilds the face terms at the current penalty (after the elements
-    /// or the fixed regions changed), the rest state and the buffers.
+    /// or the fixed regions changed), the rest state and the buffers; the
+    /// penalty is then to be checked again ([`DgElements::stabilise`]).
     pub fn refresh(&mut self, mesh: &PolyMesh, fixed: &[FixedRegion]) {
         self.refresh_around(mesh, fixed, None);
+        self.stable = false;
+    }
+
+    /// Whether the penalty was checked ([`DgElements::stabilise`]) since the
+    /// face terms were last rebuilt whole.
+    pub fn is_stable(&self) -> bool {
+        self.stable
     }
 
     /// [`DgElements::refresh`] after a topology change that rebuilt the
@@ -345,20 +358,23 @@ impl DgElements {
         Ok((PolyMesh::from_cells(nodes, &cells)?, copies))
     }
 
-    /// Doubles the interior penalty (from the options' value) until the
+    /// Doubles the interior penalty (from the one in use) until the
     /// rest-state system `K + ε diag` is positive definite (kaufmann2008
     /// §10: "start with a low value and double it"), rebuilding the face
     /// terms each time; `Bz` is stable for any penalty and is left as it
     /// is. `ε` is `1e-8` of the mean diagonal entry, far below what an
     /// insufficient penalty makes negative and far above rounding, so
-    /// that the six rigid modes of a free body do not count.
+    /// that the six rigid modes of a free body do not count. Nothing to do
+    /// (no factorisation) if the penalty was checked since the face terms
+    /// were last rebuilt whole.
     pub fn stabilise(
         &mut self,
         mesh: &PolyMesh,
         fixed: &[FixedRegion],
         pattern: &SparsePattern,
     ) -> Result<(), SolveError> {
-        if self.options.flux != Flux::Ip {
+        if self.stable || self.options.flux != Flux::Ip {
+            self.stable = true;
             return Ok(());
         }
         let mut cholesky = Cholesky::default();
@@ -372,7 +388,10 @@ impl DgElements {
                 values[pattern.diagonal_slot(d)] += 1e-8 * mean;
             }
             match cholesky.factor(pattern.matrix(&values)) {
-                Ok(()) => return Ok(()),
+                Ok(()) => {
+                    self.stable = true;
+                    return Ok(());
+                }
                 Err(SolveError::NotPositiveDefinite { .. }) => {
                     self.penalty *= 2.0;
                     self.refresh(mesh, fixed);

@@ -58,6 +58,7 @@ use crate::assembly::SparsePattern;
 use crate::dg::DgElements;
 use crate::mesh::PolyMesh;
 use crate::param::ParamError;
+use crate::solve::SolveError;
 use crate::store::{ElementStore, Family};
 use crate::Error;
 
@@ -203,9 +204,9 @@ fn rest<'a>(mesh: &'a PolyMesh, elements: &'a Model) -> &'a [[f64; 3]] {
 
 impl Simulation {
     /// Checks the parameters, validates `mesh`, builds the element store
-    /// and the sparse pattern (for the discontinuous Galerkin family, with
-    /// the interior penalty doubled until the rest system is positive
-    /// definite).
+    /// and the sparse pattern (for the discontinuous Galerkin family, the
+    /// interior penalty is checked at the first step, static solve or cut:
+    /// see [`Simulation::stabilise`]).
     pub fn new(mesh: PolyMesh, params: SimulationParams) -> Result<Self, Error> {
         params.check()?;
         mesh.validate()?;
@@ -255,19 +256,38 @@ impl Simulation {
     }
 
     /// For the discontinuous Galerkin family, after the elements or the
-    /// fixed regions changed: face terms (with the penalty doubled until
-    /// stable), pattern, masses, node and collision maps and the system.
+    /// fixed regions changed: face terms, pattern, masses, node and
+    /// collision maps and the system. The penalty is checked later, once,
+    /// by [`Simulation::stabilise`]: a body built and then fixed in several
+    /// regions factors its system once, not once per call.
     fn refresh_dg(&mut self) -> Result<(), Error> {
         let Model::Dg(dg) = &mut self.elements else {
             return Ok(());
         };
-        let (mesh, fixed) = (&self.mesh, &self.boundary.fixed);
-        dg.refresh(mesh, fixed);
+        dg.refresh(&self.mesh, &self.boundary.fixed);
         self.pattern = SparsePattern::build(dg.num_blocks(), &**dg);
-        let t = std::time::Instant::now();
-        dg.stabilise(mesh, fixed, &self.pattern)?;
-        self.timings.add(Phase::Solve, t.elapsed().as_secs_f64());
         self.refresh_dg_dependents()
+    }
+
+    /// For the discontinuous Galerkin family with interior penalty: doubles
+    /// the penalty until the rest system is positive definite, if the face
+    /// terms were rebuilt whole since it was last checked (see
+    /// [`DgElements::stabilise`]; one factorisation of the system, and one
+    /// more per doubling). The step, the static solve and the cuts do this
+    /// first; until then, [`Simulation::dg`]'s penalty and the energies and
+    /// forces of the face terms are those of the penalty last checked (the
+    /// options' at first).
+    pub fn stabilise(&mut self) -> Result<(), SolveError> {
+        let Model::Dg(dg) = &mut self.elements else {
+            return Ok(());
+        };
+        if dg.is_stable() {
+            return Ok(());
+        }
+        let t = std::time::Instant::now();
+        dg.stabilise(&self.mesh, &self.boundary.fixed, &self.pattern)?;
+        self.timings.add(Phase::Solve, t.elapsed().as_secs_f64());
+        Ok(())
     }
 
     /// For the discontinuous Galerkin family, after its elements, face

@@ -94,6 +94,8 @@ impl Simulation {
         polygon: Option<&[[f64; 3]]>,
         cut: impl Fn(&mut PolyMesh, &[u32], CutScope) -> Result<PolygonCutReport, Error>,
     ) -> Result<PolygonCutReport, Error> {
+        // (the penalty is the body's as it was built: a cut keeps it)
+        self.stabilise()?;
         let t = std::time::Instant::now();
         let rebuild = |t: &PhaseTimings| t.basis + t.assembly + t.solve;
         let before = rebuild(&self.timings);

@@ -27,6 +27,7 @@ impl Simulation {
     /// Solves the linear static problem `K u = f_gravity` with the fixed
     /// regions and pins as Dirichlet conditions, and stores `u`.
     pub fn solve_static(&mut self) -> Result<SolveStats, Error> {
+        self.stabilise()?;
         let (pattern, elements) = (&self.pattern, &self.elements);
         let values = &mut self.system.values;
         self.timings.time(Phase::Assembly, || {

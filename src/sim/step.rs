@@ -145,7 +145,7 @@ impl Simulation {
     /// step. Errors name the step.
     pub fn step(&mut self) -> Result<StepStats, Error> {
         let step = self.steps;
-        self.advance().map_err(|source| Error::Step { step, source })
+        self.stabilise().and_then(|()| self.advance()).map_err(|source| Error::Step { step, source })
     }
 
     fn advance(&mut self) -> Result<StepStats, SolveError> {

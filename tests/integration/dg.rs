@@ -259,3 +259,38 @@ fn a_block_left_touching_along_an_edge_gets_its_own_nodes() {
         }
     }
 }
+
+/// The interior penalty is checked once, lazily: building the body and
+/// fixing it leave the starting penalty unchecked, the first step (or
+/// [`Simulation::stabilise`]) doubles it to the smallest power-of-two
+/// multiple that makes the rest system positive definite (a body started
+/// at half of it doubles to it again, one started at it keeps it), and
+/// fixing another region after steps makes the next step check again.
+#[test]
+fn the_penalty_is_checked_once_before_the_first_step() {
+    let mesh = box_hex([0.0; 3], [1.0, 0.8, 0.6], [3, 2, 2]).unwrap();
+    let clamp = FixedRegion::clamp([-1.0; 3], [0.01, 2.0, 2.0]);
+    let settled = |start: f64| -> f64 {
+        let mut p = params(2, Flux::Ip);
+        p.basis.dg.penalty = start;
+        let mut sim = Simulation::new(mesh.clone(), p).unwrap();
+        sim.fix(clamp).unwrap();
+        assert!(!sim.dg().unwrap().is_stable() && sim.dg().unwrap().penalty == start);
+        sim.stabilise().unwrap();
+        assert!(sim.dg().unwrap().is_stable());
+        sim.dg().unwrap().penalty
+    };
+    let found = settled(1.0);
+    assert!(found > 1.0, "degree 2 on hexahedra needs more than the starting penalty: {found}");
+    assert_eq!(settled(found / 2.0), found, "a penalty of half was enough");
+    assert_eq!(settled(found), found);
+
+    let mut sim = Simulation::new(mesh.clone(), params(2, Flux::Ip)).unwrap();
+    sim.fix(clamp).unwrap();
+    sim.step().unwrap();
+    assert!(sim.dg().unwrap().is_stable() && sim.dg().unwrap().penalty == found);
+    sim.fix(FixedRegion::clamp([0.99, -1.0, -1.0], [2.0; 3])).unwrap();
+    assert!(!sim.dg().unwrap().is_stable());
+    sim.step().unwrap();
+    assert!(sim.dg().unwrap().is_stable() && sim.dg().unwrap().penalty >= found);
+}
