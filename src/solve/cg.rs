@@ -95,12 +95,7 @@ pub struct ConjugateGradient {
     given: BlockStructure,
     /// The matrix values in the solver's layout rounded to `f32`, for the
     /// products of the iteration, and as they are, carried only when the
-    /// iteration must read them (`carried`). The `f64` copy is sized by the
-    /// first solve that needs it: most bodies never do (the clamped
-    /// bunny_100k carried none in 20 steps at 1e-8 and twice at 1e-6),
-    /// and an array as large as the step's own matrix, grown by every cut
-    /// that outgrows its room, cost a blade cut across bunny_100k 13 ms of
-    /// page faults when it grew.
+    /// iteration must read them (`carried`).
     values32: Vec<f32>,
     values: Vec<f64>,
     carried: bool,
@@ -415,7 +410,6 @@ impl ConjugateGradient {
     /// `given` ones the first time an iteration must read them.
     fn carry_exact(&mut self, given: &[f64]) {
         if !self.carried {
-            crate::resize_with_room(&mut self.values, self.values32.len(), 0.0);
             self.numbering.carry_exact(given, &mut self.values);
             self.carried = true;
         }
@@ -872,6 +866,7 @@ impl LinearSolver for ConjugateGradient {
         }
         // (every entry is written before it is read in a solve; the arrays
         // keep room for the next cuts, [`crate::reserve_room`])
+        crate::resize_with_room(&mut self.values, pattern.row_idx().len(), 0.0);
         crate::resize_with_room(&mut self.values32, pattern.row_idx().len(), 0.0);
         self.carried = false;
         for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.x_given] {
@@ -886,7 +881,7 @@ impl LinearSolver for ConjugateGradient {
 
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
         let val = matrix.parts().1;
-        if val.len() != self.values32.len() {
+        if val.len() != self.values.len() {
             return Err(SolveError::NotReady);
         }
         // one parallel pass carries the values into the solver's layout
@@ -935,7 +930,7 @@ impl LinearSolver for ConjugateGradient {
             return Err(SolveError::NonFinite);
         }
         let n = self.b.len();
-        if matrix.parts().1.len() != self.values32.len() || b.len() != n || x.len() != n {
+        if matrix.parts().1.len() != self.values.len() || b.len() != n || x.len() != n {
             return Err(SolveError::NotReady);
         }
         let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
@@ -1297,30 +1292,6 @@ mod tests {
                 assert!(iteration < 500 && curvature <= 0.0, "iteration {iteration}, curvature {curvature:e}");
             }
             other => panic!("an indefinite matrix gave {other:?}"),
-        }
-    }
-
-    /// The `f64` copy of the values is made by the first solve that needs
-    /// it and follows the pattern from there: a solve the rounded values
-    /// serve makes none; one of a matrix beyond `f32`'s range carries the
-    /// values, and so does the next on a larger pattern (as a cut makes),
-    /// then one on a smaller.
-    #[test]
-    fn the_exact_values_are_carried_only_when_a_solve_needs_them() {
-        let mut cg = ConjugateGradient::new(1e-8, 500);
-        for (blocks, scale) in [(40, 1.0), (40, 1e40), (60, 1e40), (30, 1e40)] {
-            let (pattern, values) = chain(blocks, scale);
-            let b: Vec<f64> = (0..3 * blocks).map(|i| scale * (i as f64 * 0.37).sin()).collect();
-            cg.analyze(pattern.as_ref()).unwrap();
-            let matrix = SparseColMatRef::new(pattern.as_ref(), &values);
-            cg.factor(matrix).unwrap();
-            let mut x = vec![0.0; 3 * blocks];
-            cg.solve(matrix, &b, &mut x).unwrap();
-            assert!(residual(&pattern, &values, &b, &x) <= 1e-8, "{blocks} blocks, scale {scale:e}");
-            match scale == 1.0 {
-                true => assert!(cg.values.is_empty(), "a solve of rounded values carried the f64 ones"),
-                false => assert_eq!(cg.values.len(), values.len(), "{blocks} blocks: the carried values"),
-            }
         }
     }
 
