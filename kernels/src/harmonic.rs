@@ -158,7 +158,7 @@ pub fn evaluate(f: &MfsFunctions, points: &[[f64; 3]], phi: &mut [f64], grad: &m
 /// at every register width, so every instruction set gives the same bits.
 pub fn kernel_column(coords: [&[f64]; 3], c: [f64; 3], weights: &[f64], out: &mut [f64]) {
     assert!(coords.iter().all(|x| x.len() == out.len()) && weights.len() == out.len(), "one value per point");
-    crate::lanes::dispatch(KernelColumn { coords, c, weights, out });
+    crate::lanes::dispatch_within(crate::lanes::SimdLevel::Avx2, KernelColumn { coords, c, weights, out });
 }
 
 /// [`kernel_column`] without dispatch: the scalar reference.
@@ -204,7 +204,7 @@ fn column_loop(coords: [&[f64]; 3], c: [f64; 3], weights: &[f64], out: &mut [f64
 pub fn kernel_columns_with_gradient(coords: [&[f64]; 3], c: [f64; 3], value: &mut [f64], gradient: [&mut [f64]; 3]) {
     let n = value.len();
     assert!(coords.iter().all(|x| x.len() == n) && gradient.iter().all(|g| g.len() == n), "one value per point");
-    crate::lanes::dispatch(GradientColumns { coords, c, value, gradient });
+    crate::lanes::dispatch_within(crate::lanes::SimdLevel::Avx2, GradientColumns { coords, c, value, gradient });
 }
 
 /// [`kernel_columns_with_gradient`] without dispatch: the scalar reference.

@@ -338,6 +338,42 @@ pub fn dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
     }
 }
 
+/// [`dispatch`] at no level above `ceiling`: for the kernels that wider
+/// registers do not speed up. The block sparse product is bound by memory
+/// traffic and the harmonic kernel columns by the square root and division
+/// unit; at AVX-512 the product and the kernel column ran 7 to 9% slower
+/// than at AVX2 and than their scalar references, the kernel columns with
+/// gradients 5% slower than at AVX2 (`cleave bench --only simd`, Intel
+/// Xeon with AVX-512, medians of 9 rounds, two runs), so they run their
+/// AVX2 code there. The bits are the same at every level.
+#[inline]
+pub fn dispatch_within<Op: pulp::WithSimd>(ceiling: SimdLevel, op: Op) -> Op::Output {
+    level_within(ceiling, CAP.load(core::sync::atomic::Ordering::Relaxed)).run(op)
+}
+
+/// The best level the machine has at or below both `ceiling` and the cap
+/// `cap` (as [`CAP`] stores it).
+#[inline]
+fn level_within(ceiling: SimdLevel, cap: u8) -> SimdLevel {
+    let cap = match cap {
+        0 => SimdLevel::Avx512,
+        1 => SimdLevel::Scalar,
+        2 => SimdLevel::Avx2,
+        _ => SimdLevel::Avx512,
+    };
+    let highest = (ceiling as u8).min(cap as u8);
+    #[cfg(target_arch = "x86_64")]
+    {
+        if highest >= SimdLevel::Avx512 as u8 && pulp::x86::V4::try_new().is_some() {
+            return SimdLevel::Avx512;
+        }
+        if highest >= SimdLevel::Avx2 as u8 && pulp::x86::V3::try_new().is_some() {
+            return SimdLevel::Avx2;
+        }
+    }
+    SimdLevel::Scalar
+}
+
 /// Running a kernel on every instruction set this machine offers, for the
 /// tests that hold each kernel's SIMD path bitwise equal to its scalar
 /// reference.
@@ -364,6 +400,35 @@ pub(crate) mod levels {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The width of the registers a kernel runs on.
+    struct Width;
+    impl pulp::WithSimd for Width {
+        type Output = usize;
+        fn with_simd<S: Simd>(self, _simd: S) -> usize {
+            S::F64_LANES
+        }
+    }
+
+    /// A kernel dispatched within a ceiling runs at the best level the
+    /// machine has up to it and the cap, never above. (The cap itself is
+    /// process-wide, and another test sets it: this one passes it.)
+    #[test]
+    fn a_ceiling_holds_a_kernel_below_it() {
+        let available = SimdLevel::available();
+        let lanes = |level: SimdLevel| [1, 4, 8][level as usize];
+        for ceiling in [SimdLevel::Scalar, SimdLevel::Avx2, SimdLevel::Avx512] {
+            for (cap, capped) in
+                [(0, SimdLevel::Avx512), (1, SimdLevel::Scalar), (2, SimdLevel::Avx2), (3, SimdLevel::Avx512)]
+            {
+                let highest = (ceiling as u8).min(capped as u8);
+                let best = available.iter().copied().filter(|&l| l as u8 <= highest).max_by_key(|&l| l as u8);
+                let level = level_within(ceiling, cap);
+                assert_eq!(Some(level), best, "within {ceiling:?}, cap {cap}, on {available:?}");
+                assert_eq!(level.run(Width), lanes(level));
+            }
+        }
+    }
 
     struct AtanCheck;
     impl pulp::WithSimd for AtanCheck {

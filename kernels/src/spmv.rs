@@ -14,7 +14,7 @@
 //! the lanes in a fixed order at the end: the same arithmetic in the same
 //! order at every instruction set, so the same bits.
 
-use crate::lanes::dispatch;
+use crate::lanes::{dispatch, dispatch_within, SimdLevel};
 
 /// A stored matrix value: `f64`, or `f32` for half the memory traffic (the
 /// sums are `f64` either way).
@@ -59,7 +59,7 @@ pub fn block_products<T: Value>(
     first: usize,
     y: &mut [f64],
 ) -> f64 {
-    dispatch(Products(Operands { structure, values, x, first, y }))
+    dispatch_within(SimdLevel::Avx2, Products(Operands { structure, values, x, first, y }))
 }
 
 /// Lanes of the running sums of a column's dot product (the width of an
