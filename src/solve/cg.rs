@@ -451,18 +451,27 @@ impl ConjugateGradient {
     /// in the solver's numbering; returns `|r|`. (The product runs on the
     /// caller's structure: the solver's copy of the values is `f32`.)
     fn exact_residual(&mut self, given: &[f64], b: &[f64], x: &[f64]) -> f64 {
-        let (mut x_given, mut r_given) = (std::mem::take(&mut self.x_given), std::mem::take(&mut self.r_given));
+        let mut partial = std::mem::take(&mut self.partial);
+        self.caller_product(given, x, &mut partial);
+        self.partial = partial;
+        self.r_given.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+        self.numbering.to_new(as_blocks(&self.r_given), as_blocks_mut(&mut self.r));
+        dot(&self.r, &self.r).sqrt()
+    }
+
+    /// `self.r_given = A x` with the caller's `f64` values `given` on its
+    /// structure and numbering, for `x` in the solver's numbering (carried
+    /// into `self.x_given`); returns `x · A x`, summed per fixed chunk of
+    /// the caller's blocks (into `partial`) and the chunk sums in order.
+    fn caller_product(&mut self, given: &[f64], x: &[f64], partial: &mut [f64]) -> f64 {
+        let (mut x_given, mut y_given) = (std::mem::take(&mut self.x_given), std::mem::take(&mut self.r_given));
         self.numbering.to_old(as_blocks(x), as_blocks_mut(&mut x_given));
         let structure = self.given.columns();
-        r_given.par_chunks_mut(3 * CHUNK_BLOCKS).zip(b.par_chunks(3 * CHUNK_BLOCKS)).enumerate().for_each(
-            |(c, (r, b))| {
-                block_products(structure, given, &x_given, c * CHUNK_BLOCKS, r);
-                r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
-            },
-        );
-        self.numbering.to_new(as_blocks(&r_given), as_blocks_mut(&mut self.r));
-        (self.x_given, self.r_given) = (x_given, r_given);
-        dot(&self.r, &self.r).sqrt()
+        y_given.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (y, part))| {
+            *part = block_products(structure, given, &x_given, c * CHUNK_BLOCKS, y);
+        });
+        (self.x_given, self.r_given) = (x_given, y_given);
+        partial.iter().sum()
     }
 
     /// [`ConjugateGradient::iterate`] on the `f64` values (`exact`) or on
@@ -493,19 +502,9 @@ impl ConjugateGradient {
             Operator::Rounded(values) => self.matvec(values, x, y, partial),
             Operator::Copied(values) => self.matvec(values, x, y, partial),
             Operator::Caller(given) => {
-                // (carried to the caller's numbering and back; summed per
-                // fixed chunk of the caller's blocks, in order)
-                let (mut x_given, mut y_given) = (std::mem::take(&mut self.x_given), std::mem::take(&mut self.r_given));
-                self.numbering.to_old(as_blocks(x), as_blocks_mut(&mut x_given));
-                let structure = self.given.columns();
-                y_given.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(
-                    |(c, (y, part))| {
-                        *part = block_products(structure, given, &x_given, c * CHUNK_BLOCKS, y);
-                    },
-                );
-                self.numbering.to_new(as_blocks(&y_given), as_blocks_mut(y));
-                (self.x_given, self.r_given) = (x_given, y_given);
-                partial.iter().sum()
+                let x_ay = self.caller_product(given, x, partial);
+                self.numbering.to_new(as_blocks(&self.r_given), as_blocks_mut(y));
+                x_ay
             }
         }
     }
@@ -1047,10 +1046,12 @@ impl LinearSolver for ConjugateGradient {
     /// vectors and sums stay `f64`. The residual it reports is `b - A x`
     /// with the `f64` values: when the iteration meets the tolerance on the
     /// rounded matrix but not on the exact one, it carries on from the
-    /// exact residual in the same direction (a reliable update, Sleijpen
-    /// and van der Vorst 1996), and should the exact residual not
-    /// have halved since the last one (the rounded matrix too far from the
-    /// exact one), it iterates on the `f64` values from there. The iteration runs in the
+    /// exact residual (and on the way there, replaces the drifting
+    /// recurrence by the exact residual in the same direction: a reliable
+    /// update, Sleijpen and van der Vorst 1996), and should the exact
+    /// residual not have halved since the last one (the rounded matrix too
+    /// far from the exact one), it iterates on the `f64` values from
+    /// there. The iteration runs in the
     /// solver's numbering of the blocks: `b` and the guess `x` are carried
     /// there, the solution back.
     fn solve(
