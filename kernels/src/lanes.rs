@@ -340,12 +340,10 @@ pub fn dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
 
 /// [`dispatch`] at no level above `ceiling`: for the kernels that wider
 /// registers do not speed up. The block sparse product is bound by memory
-/// traffic and the harmonic kernel columns by the square root and division
-/// unit; at AVX-512 the product and the kernel column ran 7 to 9% slower
-/// than at AVX2 and than their scalar references, the kernel columns with
-/// gradients 5% slower than at AVX2 (`cleave bench --only simd`, Intel
-/// Xeon with AVX-512, medians of 9 rounds, two runs), so they run their
-/// AVX2 code there. The bits are the same at every level.
+/// traffic; at AVX-512 it ran 7 to 9% slower than at AVX2 and than its
+/// scalar reference (`cleave bench --only simd`, Intel Xeon with AVX-512,
+/// medians of 9 rounds, two runs), so it runs its AVX2 code there. The
+/// bits are the same at every level.
 #[inline]
 pub fn dispatch_within<Op: pulp::WithSimd>(ceiling: SimdLevel, op: Op) -> Op::Output {
     level_within(ceiling, CAP.load(core::sync::atomic::Ordering::Relaxed)).run(op)
