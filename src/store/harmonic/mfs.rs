@@ -31,12 +31,11 @@ use std::cell::RefCell;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
-use faer::linalg::lu::partial_pivoting;
 use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::reborrow::IntoConst;
-use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
+use faer::{Accum, Conj, MatMut, MatRef, Par};
 
 /// The fundamental solution of the Laplacian in `D` dimensions (up to a
 /// constant factor), `ψ(r) = ln r` in 2D and `1/r` in 3D, in place of each
@@ -359,46 +358,44 @@ fn solve_qr<'o>(
 
 /// Projects the coefficients (row-major `(n + D + 1) x k`) onto the affine
 /// set where `Σ_a C[:, a] = e_const` and `Σ_a x̂_a,i C[:, a] = e_lin_i`
-/// with the least change: `C -= (C P - T) (PᵀP)⁻¹ Pᵀ`, `P = [1, x̂_a]`.
+/// with the least change: `C -= (C P - T) (PᵀP)⁻¹ Pᵀ`, `P = [1, x̂_a]`
+/// (`PᵀP` padded to 4 x 4 with the identity in 2D). `None` when the nodes
+/// do not span the space (`PᵀP` singular).
 fn reproduce_linear<const D: usize>(c: &mut [f64], n: usize, nodes: &[[f64; D]]) -> Option<()> {
     let k = nodes.len();
-    let rows = n + D + 1;
-    let p = |a: usize, l: usize| if l == 0 { 1.0 } else { nodes[a][l - 1] };
-    // Gram matrix PᵀP ((D+1)²) and its inverse by LU, on this thread (a
-    // parallel call would let the pool run other jobs here meanwhile)
     let dim = D + 1;
-    let mut lu = Mat::<f64>::from_fn(dim, dim, |r, s| (0..k).map(|a| p(a, r) * p(a, s)).sum());
-    let (mut perm, mut perm_inv) = ([0usize; 4], [0usize; 4]);
-    let scratch = StackReq::any_of(&[
-        partial_pivoting::factor::lu_in_place_scratch::<usize, f64>(dim, dim, Par::Seq, Default::default()),
-        partial_pivoting::inverse::inverse_scratch::<usize, f64>(dim, Par::Seq),
-    ]);
-    let mut buffer = MemBuffer::new(scratch);
-    let (perm, perm_inv) = (&mut perm[..dim], &mut perm_inv[..dim]);
-    let stack = MemStack::new(&mut buffer);
-    let (_, row_perm) =
-        partial_pivoting::factor::lu_in_place(lu.as_mut(), perm, perm_inv, Par::Seq, stack, Default::default());
-    let mut ginv = Mat::<f64>::zeros(dim, dim);
-    // (the unit lower factor and the upper one share `lu`)
-    partial_pivoting::inverse::inverse(
-        ginv.as_mut(),
-        lu.as_ref(),
-        lu.as_ref(),
-        row_perm,
-        Par::Seq,
-        MemStack::new(&mut buffer),
-    );
-    if !ginv.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
-        return None;
-    }
+    // the rows of P, zero beyond `dim`
+    let p: Vec<[f64; 4]> = nodes
+        .iter()
+        .map(|x| {
+            let mut row = [0.0; 4];
+            row[0] = 1.0;
+            row[1..dim].copy_from_slice(x);
+            row
+        })
+        .collect();
+    let gram: [[f64; 4]; 4] = std::array::from_fn(|r| {
+        std::array::from_fn(|s| match (r < dim && s < dim, r == s) {
+            (true, _) => p.iter().map(|pa| pa[r] * pa[s]).sum(),
+            (false, diagonal) => f64::from(u8::from(diagonal)),
+        })
+    });
+    let identity: [[f64; 4]; 4] = std::array::from_fn(|r| std::array::from_fn(|s| f64::from(u8::from(r == s))));
+    let largest = (0..4).map(|i| gram[i][i]).fold(0.0, f64::max);
+    let inverse = cleave_kernels::solve4::solve4(gram, identity, 1e-12 * largest)?;
+    // Q = (PᵀP)⁻¹ Pᵀ, one row of 4 per node
+    let q: Vec<[f64; 4]> =
+        p.iter().map(|pa| std::array::from_fn(|l| (0..4).map(|s| inverse[l][s] * pa[s]).sum())).collect();
     let target = |row: usize, l: usize| if (l == 0 && row == n + D) || (l > 0 && row == n + l - 1) { 1.0 } else { 0.0 };
-    for row in 0..rows {
-        let ci = &mut c[row * k..(row + 1) * k];
-        // residual E = C P - T of this row
-        let e: Vec<f64> = (0..dim).map(|l| (0..k).map(|a| ci[a] * p(a, l)).sum::<f64>() - target(row, l)).collect();
-        let eg: Vec<f64> = (0..dim).map(|s| (0..dim).map(|r| e[r] * ginv[(r, s)]).sum()).collect();
-        for (a, v) in ci.iter_mut().enumerate() {
-            *v -= (0..dim).map(|s| eg[s] * p(a, s)).sum::<f64>();
+    for (row, ci) in c.chunks_exact_mut(k).enumerate().take(n + D + 1) {
+        // the residual E = C P - T of this row
+        let mut e = [0.0; 4];
+        for (c, pa) in ci.iter().zip(&p) {
+            (0..4).for_each(|l| e[l] += c * pa[l]);
+        }
+        (0..dim).for_each(|l| e[l] -= target(row, l));
+        for (v, qa) in ci.iter_mut().zip(&q) {
+            *v -= (0..4).map(|l| e[l] * qa[l]).sum::<f64>();
         }
     }
     Some(())
