@@ -338,15 +338,16 @@ pub fn dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
     }
 }
 
-/// [`dispatch`] at no level above `ceiling`: for the kernels that wider
-/// registers do not speed up. The block sparse product is bound by memory
-/// traffic; at AVX-512 it ran 7 to 9% slower than at AVX2 and than its
-/// scalar reference (`cleave bench --only simd`, Intel Xeon with AVX-512,
-/// medians of 9 rounds, two runs), so it runs its AVX2 code there. The
-/// bits are the same at every level.
+/// The level a kernel runs at that wider registers than `ceiling` do not
+/// speed up: the best the machine has at or below both `ceiling` and the
+/// cap. The block sparse product ran 7 to 9% slower at AVX-512 than at
+/// AVX2 and than its scalar reference (`cleave bench --only simd`, Intel
+/// Xeon with AVX-512, medians of 9 rounds, two runs), and its explicit
+/// AVX2 code no faster at AVX-512 (0.36 against 0.33 ms on bunny_100k),
+/// so it runs at AVX2 there. The bits are the same at every level.
 #[inline]
-pub fn dispatch_within<Op: pulp::WithSimd>(ceiling: SimdLevel, op: Op) -> Op::Output {
-    level_within(ceiling, CAP.load(core::sync::atomic::Ordering::Relaxed)).run(op)
+pub fn dispatched_level(ceiling: SimdLevel) -> SimdLevel {
+    level_within(ceiling, CAP.load(core::sync::atomic::Ordering::Relaxed))
 }
 
 /// The best level the machine has at or below both `ceiling` and the cap
