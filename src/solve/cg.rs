@@ -818,14 +818,19 @@ fn update(
                 .zip(p.chunks_exact(3).zip(ap.chunks_exact(3)))
                 .enumerate()
             {
+                // (the new residual is kept in registers: read back from
+                // its two scalar stores as one vector, it stalled the
+                // pass on the failed store forwarding)
+                let new: [f64; 3] = std::array::from_fn(|d| r[d] - alpha * ap[d]);
                 for d in 0..3 {
                     x[d] += alpha * p[d];
-                    r[d] -= alpha * ap[d];
                 }
-                rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+                r.copy_from_slice(&new);
+                rr += new[0] * new[0] + new[1] * new[1] + new[2] * new[2];
                 if let Some(inverse) = inverse {
-                    z.copy_from_slice(&symmetric_times(&inverse[c * CHUNK_BLOCKS + q], r));
-                    rz += r[0] * z[0] + r[1] * z[1] + r[2] * z[2];
+                    let zn = symmetric_times(&inverse[c * CHUNK_BLOCKS + q], &new);
+                    z.copy_from_slice(&zn);
+                    rz += new[0] * zn[0] + new[1] * zn[1] + new[2] * zn[2];
                 }
             }
             if let Some(coarse) = coarse {
