@@ -28,6 +28,7 @@ pub mod dual;
 pub mod elasticity;
 pub mod envelope;
 pub mod harmonic;
+pub mod inverse_factor;
 pub mod lanes;
 pub mod logarithm;
 
