@@ -119,6 +119,27 @@ fn a_step_allocates_nothing_after_the_first() {
             assert_eq!(n, 0, "{solver:?} after a cut: three steps allocated {n} times");
         });
     }
+    // a bar of 576 nodes has too many aggregates for the coarse level to
+    // solve their system exactly: its cycle factors and solves a block per
+    // group of aggregates, made again every few steps
+    let mesh = box_tet([0.0; 3], [3.0, 1.0, 1.0], [15, 5, 5]).unwrap();
+    let params = SimulationParams {
+        material: Material::new(1e5, 0.3, 1000.0).unwrap(),
+        solver: SolverKind::Cg,
+        tolerance: 1e-8,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(mesh, params).unwrap();
+    sim.fix(FixedRegion::clamp([-1.0; 3], [1e-3, 2.0, 2.0])).unwrap();
+    pool.install(|| {
+        sim.step().unwrap();
+        let n = allocations_of(|| {
+            for _ in 0..6 {
+                sim.step().unwrap();
+            }
+        });
+        assert_eq!(n, 0, "the larger bar: six steps allocated {n} times");
+    });
 }
 
 #[test]

@@ -3,9 +3,10 @@
 //! corrections (`history.rs`) and corrected by the coarse solution of its
 //! residual, with an additive multilevel preconditioner: 3x3 block Jacobi
 //! plus the coarse correction of the rigid motions of node aggregates
-//! (`coarse.rs`), `z = D⁻¹ r + P B Pᵀ r`, `B ≈ (Pᵀ A P)⁻¹` block Jacobi on
-//! the aggregates' motions plus the exact solve on those of aggregates of
-//! aggregates (`aggregate_cycle.rs`).
+//! (`coarse.rs`), `z = D⁻¹ r + P B Pᵀ r`, `B ≈ (Pᵀ A P)⁻¹` the exact solve
+//! on the rigid motions of aggregates of aggregates plus the exact solves
+//! on the blocks of the aggregates' motions within each of them
+//! (`aggregate_cycle.rs`).
 //!
 //! The matrix stores both triangles and is symmetric, so `y = A x` is
 //! computed row by row as `y_i = (column i) · x`, in parallel without
@@ -1455,8 +1456,12 @@ mod tests {
         let exact = residual(&pattern, &values, &b, &x);
         assert!(exact <= 3e-9, "exact residual {exact:e}");
         // (a residual 3e-9 of `b` on a matrix of condition 4e7: the two
-        // sums, in different orders, agree to about three digits)
-        assert!((stats.residual - exact).abs() <= 1e-3 * exact, "reported {:e}, exact {exact:e}", stats.residual);
+        // sums, in different orders, agree to two or three digits, 6e-4
+        // to 2.2e-3 of it as the preconditioner changed; the recurrence on
+        // the rounded values, which this tells apart from the exact
+        // residual, drifts from it by about ROUNDED_DRIFT of `b`, thousands
+        // of times this residual)
+        assert!((stats.residual - exact).abs() <= 1e-2 * exact, "reported {:e}, exact {exact:e}", stats.residual);
         assert!(cg.rounded && cg.values.is_empty(), "no f64 copy for a matrix within f32's range");
     }
 

@@ -11,13 +11,15 @@
 //! positions. The correction added to the smoother's `z` is `P B Pᵀ r`,
 //! `B ≈ A₁⁻¹` the cycle of `aggregate_cycle.rs` on `A₁ = Pᵀ A P` (exactly
 //! `A₁⁻¹` when there are few aggregates): the exact solve on the rigid
-//! motions of aggregates of aggregates plus block Jacobi on the
-//! aggregates'. It removes the error that block Jacobi reduces slowly:
-//! motions of whole regions, which only the mass resists while block
+//! motions of aggregates of aggregates plus the exact solves on the
+//! blocks of `A₁` of each aggregate of aggregates' own aggregates. It
+//! removes the error that block Jacobi reduces slowly: motions of whole
+//! regions, which only the mass resists while block
 //! Jacobi divides by the much larger stiffness diagonal. (The coarse level
 //! was first the aggregates of aggregates alone, 32 on bunny_100k, with a
 //! dense factor: the clamped bunny's steps took 107 iterations at 1e-8
-//! with it, 79 with the aggregates' block Jacobi added.)
+//! with it, 79 with the aggregates' block Jacobi added; see
+//! `aggregate_cycle.rs` for the groups' blocks that replaced it.)
 //!
 //! Aggregates follow the matrix graph, so no aggregate spans two pieces of
 //! a cut body. Every sum runs in a fixed order, so the correction has the
