@@ -3,8 +3,8 @@
 //! AVX-512 forced in turn through [`cap_simd_level`]), in one run.
 //!
 //! The reference is the kernel's plain-`f64` function (`*_scalar`), except
-//! for the block sparse product, the health check's spectra and the
-//! envelope Cholesky, which have none: their reference is the same code on
+//! for the block sparse product, the inverse factors of the coarse level,
+//! the health check's spectra and the envelope Cholesky, which have none: their reference is the same code on
 //! pulp's one-lane scalar backend. Rows report the time of a fixed
 //! amount of work (the median over alternated rounds of the reference and
 //! every level) and the speed-up over the reference (the median of the
@@ -13,7 +13,9 @@
 
 use cleave::Error;
 use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
-use cleave_kernels::{elasticity, envelope, harmonic, logarithm, moments, polynomial, rotation, spectrum, spmv};
+use cleave_kernels::{
+    elasticity, envelope, harmonic, inverse_factor, logarithm, moments, polynomial, rotation, spectrum, spmv,
+};
 
 use crate::bench::{basis_eval_ms, best_ms, EvalKernel, Measurement};
 
@@ -259,6 +261,21 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     kernels.push(Kernel::one_lane("block sparse product of vectors", size_8, move || {
         let columns = blocks_8.columns();
         let (ms, ()) = best_ms(5 * scale, || spmv::block_products_of_vectors(columns, &values_8, &x_8, 0, &mut y_8));
+        ms
+    }));
+
+    // the coarse level's groups' blocks: 51 inverse factors of order 108
+    // (as on bunny_100k with its base clamped), each applied to a vector
+    let order = 108;
+    let factors: Vec<f32> = (0..51 * inverse_factor::packed_len(order)).map(|i| noise(i + 3) as f32).collect();
+    let (mut side, mut scratch) = (vec![0.0; order], vec![0.0; order]);
+    kernels.push(Kernel::one_lane("inverse factor apply", format!("51 blocks of order {order}"), move || {
+        let (ms, ()) = best_ms(5 * scale, || {
+            for factor in factors.chunks_exact(inverse_factor::packed_len(order)) {
+                side.iter_mut().enumerate().for_each(|(i, v)| *v = noise(i));
+                inverse_factor::apply(factor, &mut side, &mut scratch);
+            }
+        });
         ms
     }));
 
