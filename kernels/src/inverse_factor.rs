@@ -12,7 +12,7 @@
 //! block they ran at 5 GFlop/s (Intel Xeon, AVX-512). With the inverse,
 //! `w = M v` adds column `j` times `v_j` into `w` (independent updates),
 //! and `(Mᵀ w)_j` is the dot product of column `j` with `w` from `j` down
-//! (independent of the other columns'), in [`LANES`] running sums added in
+//! (independent of the other columns'), in eight running sums added in
 //! a fixed tree, then the tail: the same bits on every instruction set,
 //! under runtime dispatch so that those sums fill wide registers.
 

@@ -14,8 +14,8 @@
 //! the lanes in a fixed order at the end: the same arithmetic in the same
 //! order at every instruction set, so the same bits.
 //!
-//! The generic kernel ([`Products`]) is the reference and the scalar path.
-//! With AVX2 the product runs [`avx2::block_products`] instead, the same
+//! The generic kernel (`Products`) is the reference and the scalar path.
+//! With AVX2 the product runs `avx2::block_products` instead, the same
 //! arithmetic written with the instructions themselves: the compiler's
 //! vectorisation of the generic kernel took each column's tail one value
 //! at a time and its horizontal sums through the stack, and the product
