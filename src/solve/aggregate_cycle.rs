@@ -27,7 +27,9 @@
 //! blocks of `A₁` in place of the groups' blocks, took 65.9 iterations
 //! per step on bunny_100k clamped at 1e-8 (43.2 at 1e-6), the groups'
 //! blocks 55.8 (36.8), for 0.1 ms more per iteration: the solve 53.4 ->
-//! 50.9 ms (2 cores, Intel Xeon; the exact solve of `A₁` takes 55 at
+//! 50.9 ms (2 cores, Intel Xeon; a group of more than
+//! [`MAX_BLOCK_AGGREGATES`] aggregates is split into runs of them, 56.05
+//! iterations at 1e-8; the exact solve of `A₁` takes 55 at
 //! 1e-8 over the first 10 steps, against 77 and 65 for the two). Blocks
 //! of 7 groups of 770 modes instead of 51 of about 100 gained almost
 //! nothing more (63.8 against 65.2 iterations over those 10 steps).
@@ -94,14 +96,51 @@ pub(super) struct NotPositive {
     pub aggregate: usize,
 }
 
-/// A group's block of `A₁`, factored, and its workspace.
+/// The most aggregates of one block of the local solves: a group of more
+/// is split into runs of its aggregates (in their order, which follows the
+/// solver's numbering of the nodes) of at most this many. The factor of a
+/// block of `n` modes costs `n³` flops at every refresh and its solve `n²`
+/// per iteration: on a 1M-tetrahedron box falling (`cleave bench --only
+/// steps`, 2 cores, Intel Xeon) the groups held about 50 aggregates each,
+/// and whole-group blocks took its step's solve from 0.50 s (with the
+/// aggregates' diagonal blocks) to 2.3 s, blocks of at most 24 aggregates
+/// to 0.61 s and of 12 to 0.56 s; the clamped bunny_100k (groups of 17.6
+/// on average) took 55.75 iterations per step at 1e-8 with whole groups,
+/// 56.05 with runs of 12.
+const MAX_BLOCK_AGGREGATES: usize = 12;
+
+/// A block of `A₁` of the local solves, factored, and its workspace.
+#[derive(Default)]
 struct LocalBlock {
     dense: Vec<f64>,
     inverse: Vec<f64>,
     factor: Vec<f32>,
-    stack: MemBuffer,
+    stack: Option<MemBuffer>,
     side: Vec<f64>,
     scratch: Vec<f64>,
+}
+
+impl LocalBlock {
+    /// Room for a block of order `n`, keeping what it has (a cut's new
+    /// blocks reuse their predecessors' memory).
+    fn fit(&mut self, n: usize) {
+        let grow = |v: &mut Vec<f64>, len: usize| {
+            if v.len() < len {
+                v.resize(len, 0.0);
+            }
+        };
+        grow(&mut self.dense, n * n);
+        grow(&mut self.inverse, n * n);
+        grow(&mut self.side, n);
+        grow(&mut self.scratch, n);
+        if self.factor.len() < packed_len(n) {
+            self.factor.resize(packed_len(n), 0.0);
+        }
+        let needed = cholesky_scratch(n);
+        if self.stack.as_ref().is_none_or(|s| s.len() < needed.size_bytes()) {
+            self.stack = Some(MemBuffer::new(needed));
+        }
+    }
 }
 
 impl std::fmt::Debug for LocalBlock {
@@ -131,11 +170,15 @@ pub(super) struct AggregateCycle {
     /// Whether every aggregate is its own group: the cycle is then the
     /// exact solve of `A₁`.
     exact: bool,
-    /// Per group `g`, the lower Cholesky factor of the block of `A₁` on
-    /// its aggregates (`n x n`, column-major, `n = k m_g` for its `m_g`
-    /// aggregates, in the order of `members`), its Cholesky scratch, and
-    /// room for a right-hand side: sized for six modes when the groups are
-    /// made, so that a factor or a solve allocates nothing.
+    /// The blocks of the local solves: block `b` holds the aggregates
+    /// `members[block_ptr[b]..block_ptr[b + 1]]`, all of one group (a
+    /// group of at most [`MAX_BLOCK_AGGREGATES`], or a run of one).
+    block_ptr: Vec<u32>,
+    /// Per block, the inverse of the Cholesky factor of its block of `A₁`
+    /// (`n = k m` modes for its `m` aggregates, in the order of `members`),
+    /// its scratch and room for a right-hand side: sized for six modes
+    /// when the groups are made, so that a factor or a solve allocates
+    /// nothing.
     local: Vec<LocalBlock>,
     /// The diagonal blocks of `A₂ = Tᵀ A₁ T`, one per component, each
     /// dense (column-major) and overwritten by its lower Cholesky factor,
@@ -156,20 +199,19 @@ impl AggregateCycle {
         let (mut of, groups) = grouping.unwrap_or_else(|| ((0..aggregates as u32).collect(), aggregates));
         let component_ptr = number_by_component(graph, &mut of, groups);
         let (ptr, members) = super::coarse::group(&of, groups);
-        let side = |g: usize| 6 * (ptr[g + 1] - ptr[g]) as usize;
-        let local = match exact {
-            true => Vec::new(),
-            false => (0..groups)
-                .map(|g| LocalBlock {
-                    dense: vec![0.0; side(g) * side(g)],
-                    inverse: vec![0.0; side(g) * side(g)],
-                    scratch: vec![0.0; side(g)],
-                    factor: vec![0.0; packed_len(side(g))],
-                    stack: MemBuffer::new(cholesky_scratch(side(g))),
-                    side: vec![0.0; side(g)],
-                })
-                .collect(),
-        };
+        let mut block_ptr = vec![0u32];
+        if !exact {
+            for g in 0..groups {
+                let (start, len) = (ptr[g] as usize, (ptr[g + 1] - ptr[g]) as usize);
+                let runs = len.div_ceil(MAX_BLOCK_AGGREGATES).max(1);
+                block_ptr.extend((1..=runs).map(|r| (start + r * len / runs) as u32));
+            }
+        }
+        let mut local = old.local;
+        local.resize_with(block_ptr.len() - 1, LocalBlock::default);
+        for (block, run) in local.iter_mut().zip(block_ptr.windows(2)) {
+            block.fit(6 * (run[1] - run[0]) as usize);
+        }
         AggregateCycle {
             of,
             groups,
@@ -177,6 +219,7 @@ impl AggregateCycle {
             members,
             component_ptr,
             exact,
+            block_ptr,
             local,
             factor: old.factor,
             stack: old.stack,
@@ -240,24 +283,21 @@ impl AggregateCycle {
         self.factor_groups(a1, rotations)
     }
 
-    /// The blocks of `A₁` on each group's aggregates, assembled and
-    /// factored in parallel over the groups.
+    /// The blocks of `A₁` of the local solves, assembled and factored in
+    /// parallel.
     fn factor_local(&mut self, a1: &AggregateMatrix) -> Result<(), NotPositive> {
         let (k, kk) = (a1.k, a1.k * a1.k);
-        let (ptr, members, of) = (&self.ptr, &self.members, &self.of);
-        let failed = (self.local.par_iter_mut().enumerate())
-            .map(|(g, block)| {
-                let members = &members[ptr[g] as usize..ptr[g + 1] as usize];
+        let (block_ptr, members) = (&self.block_ptr, &self.members);
+        let failed = (self.local.par_iter_mut().zip(block_ptr.par_windows(2)))
+            .map(|(block, run)| {
+                let members = &members[run[0] as usize..run[1] as usize];
                 let n = k * members.len();
                 let dense = &mut block.dense[..n * n];
                 dense.fill(0.0);
                 for (column, &b) in members.iter().enumerate() {
                     for p in a1.ptr[b as usize] as usize..a1.ptr[b as usize + 1] as usize {
-                        let a = a1.rows[p];
-                        if of[a as usize] as usize != g {
-                            continue;
-                        }
-                        let row = members.binary_search(&a).expect("the group's aggregates are its members");
+                        // (the block's aggregates ascend)
+                        let Ok(row) = members.binary_search(&a1.rows[p]) else { continue };
                         let values = &a1.values[kk * p..kk * (p + 1)];
                         for c in 0..k {
                             let at = (k * column + c) * n + k * row;
@@ -269,7 +309,7 @@ impl AggregateCycle {
                     MatMut::from_column_major_slice_mut(dense, n, n),
                     Default::default(),
                     Par::Seq,
-                    MemStack::new(&mut block.stack),
+                    MemStack::new(block.stack.as_mut().expect("sized when the blocks are made")),
                     Default::default(),
                 );
                 if let Err(llt::factor::LltError::NonPositivePivot { index }) = factored {
@@ -380,8 +420,8 @@ impl AggregateCycle {
         rayon::join(
             || this.groups_correction(&mut coarse, k, g, e),
             || {
-                local.par_iter_mut().enumerate().for_each(|(group, block)| {
-                    let members = &this.members[this.ptr[group] as usize..this.ptr[group + 1] as usize];
+                local.par_iter_mut().zip(this.block_ptr.par_windows(2)).for_each(|(block, run)| {
+                    let members = &this.members[run[0] as usize..run[1] as usize];
                     let n = k * members.len();
                     for (side, &a) in block.side.chunks_exact_mut(k).zip(members) {
                         side.copy_from_slice(&g[k * a as usize..k * (a as usize + 1)]);
@@ -392,8 +432,8 @@ impl AggregateCycle {
             },
         );
         (self.coarse, self.local) = (coarse, local);
-        for (block, group) in self.local.iter().zip(self.ptr.windows(2)) {
-            let members = &self.members[group[0] as usize..group[1] as usize];
+        for (block, run) in self.local.iter().zip(self.block_ptr.windows(2)) {
+            let members = &self.members[run[0] as usize..run[1] as usize];
             for (side, &a) in block.side.chunks_exact(k).zip(members) {
                 e[k * a as usize..k * (a as usize + 1)].iter_mut().zip(side).for_each(|(e, s)| *e += s);
             }
