@@ -102,6 +102,7 @@ impl pulp::WithSimd for Apply<'_> {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{packed_len, LANES};
+    use crate::spmv::avx2::{lane_sum, Lanes};
     use core::arch::x86_64::*;
 
     /// `v = Mᵀ (M v)`; panics without AVX2.
@@ -144,16 +145,11 @@ mod avx2 {
             }
             let (mut low, mut high) = (_mm256_setzero_pd(), _mm256_setzero_pd());
             for i in (0..full).step_by(LANES) {
-                let values = _mm256_loadu_ps(column.add(i));
-                let (a, b) = (_mm256_castps256_ps128(values), _mm256_extractf128_ps(values, 1));
-                low = _mm256_add_pd(low, _mm256_mul_pd(_mm256_cvtps_pd(a), _mm256_loadu_pd(wj.add(i))));
-                high = _mm256_add_pd(high, _mm256_mul_pd(_mm256_cvtps_pd(b), _mm256_loadu_pd(wj.add(i + 4))));
+                let (a, b) = f32::load(column.add(i));
+                low = _mm256_add_pd(low, _mm256_mul_pd(a, _mm256_loadu_pd(wj.add(i))));
+                high = _mm256_add_pd(high, _mm256_mul_pd(b, _mm256_loadu_pd(wj.add(i + 4))));
             }
-            // ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)), then the tail
-            let pairs = _mm256_hadd_pd(low, high);
-            let halves = _mm_add_pd(_mm256_castpd256_pd128(pairs), _mm256_extractf128_pd(pairs, 1));
-            let lanes = _mm_cvtsd_f64(_mm_add_sd(halves, _mm_unpackhi_pd(halves, halves)));
-            *vj = lanes + tail;
+            *vj = lane_sum(low, high) + tail;
             at += len;
         }
     }

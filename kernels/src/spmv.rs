@@ -315,11 +315,15 @@ pub(crate) mod avx2 {
         unsafe { products(structure, values, x, first, y) }
     }
 
-    /// The sum of the eight lanes `low`, `high` in [`Products`]'s order.
+    /// The sum of the eight lanes `low`, `high` in [`Products`]'s order,
+    /// `((s₀ + s₁) + (s₂ + s₃)) + ((s₄ + s₅) + (s₆ + s₇))`.
+    ///
+    /// # Safety
+    /// AVX2 is available.
     ///
     /// [`Products`]: super::Products
     #[inline(always)]
-    unsafe fn lane_sum(low: __m256d, high: __m256d) -> f64 {
+    pub(crate) unsafe fn lane_sum(low: __m256d, high: __m256d) -> f64 {
         // [s0 + s1, s4 + s5, s2 + s3, s6 + s7]
         let pairs = _mm256_hadd_pd(low, high);
         // [(s0 + s1) + (s2 + s3), (s4 + s5) + (s6 + s7)]
