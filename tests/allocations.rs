@@ -64,6 +64,15 @@ fn allocations_of(f: impl FnOnce()) -> usize {
     ALLOCATIONS.load(Ordering::SeqCst)
 }
 
+/// Allocations made by `steps` steps of `sim`.
+fn allocations_of_steps(sim: &mut Simulation, steps: usize) -> usize {
+    allocations_of(|| {
+        for _ in 0..steps {
+            sim.step().unwrap();
+        }
+    })
+}
+
 /// A bar of tetrahedra cut once (so mean value polyhedra join them),
 /// clamped at one end, one node pinned, resting on a collider it presses
 /// into.
@@ -100,22 +109,14 @@ fn a_step_allocates_nothing_after_the_first() {
             sim.step().unwrap();
             let stats = sim.step().unwrap();
             assert!(stats.contacts > 0, "{solver:?}: the body presses into the collider");
-            let n = allocations_of(|| {
-                for _ in 0..5 {
-                    sim.step().unwrap();
-                }
-            });
+            let n = allocations_of_steps(&mut sim, 5);
             assert_eq!(n, 0, "{solver:?}: five steps allocated {n} times");
         });
         // a cut changes the sizes: its first step may allocate, the next not
         sim.cut_plane(&Plane { point: [0.9, 0.5, 0.5], normal: [1.0, -0.2, 0.1] }).unwrap();
         pool.install(|| {
             sim.step().unwrap();
-            let n = allocations_of(|| {
-                for _ in 0..3 {
-                    sim.step().unwrap();
-                }
-            });
+            let n = allocations_of_steps(&mut sim, 3);
             assert_eq!(n, 0, "{solver:?} after a cut: three steps allocated {n} times");
         });
     }
@@ -133,11 +134,7 @@ fn a_step_allocates_nothing_after_the_first() {
     sim.fix(FixedRegion::clamp([-1.0; 3], [1e-3, 2.0, 2.0])).unwrap();
     pool.install(|| {
         sim.step().unwrap();
-        let n = allocations_of(|| {
-            for _ in 0..6 {
-                sim.step().unwrap();
-            }
-        });
+        let n = allocations_of_steps(&mut sim, 6);
         assert_eq!(n, 0, "the larger bar: six steps allocated {n} times");
     });
 }
