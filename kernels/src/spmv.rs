@@ -425,8 +425,9 @@ pub(crate) mod avx2 {
     /// values are first converted to `f64` on the stack, eight at a time,
     /// so that each is then broadcast by a load alone: converting and
     /// broadcasting each value from a register took two shuffle-port
-    /// instructions per value, the product's bottleneck (0.81 against 0.98
-    /// ms on bunny_100k, 2 threads, Intel Xeon).
+    /// instructions per value, the product's bottleneck (0.82-0.92 against
+    /// 0.97-0.99 ms on bunny_100k, 2 threads, Intel Xeon; 1.36 against 1.66
+    /// ms on one thread, `cleave bench --only simd`).
     #[target_feature(enable = "avx2")]
     unsafe fn vector_products<T: Lanes>(
         structure: BlockColumns<'_>,
