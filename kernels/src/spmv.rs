@@ -15,7 +15,8 @@
 //! order at every instruction set, so the same bits.
 //!
 //! The generic kernel (`Products`) is the reference and the scalar path.
-//! With AVX2 the product runs `avx2::block_products` instead, the same
+//! With AVX2 the product runs `avx2::block_products` instead (and the
+//! product with eight vectors `avx2::block_products_of_vectors`), the same
 //! arithmetic written with the instructions themselves: the compiler's
 //! vectorisation of the generic kernel took each column's tail one value
 //! at a time and its horizontal sums through the stack, and the product
@@ -436,9 +437,11 @@ pub(crate) mod avx2 {
         first: usize,
         y: &mut [f64],
     ) {
-        // each scalar column's values of a segment, as f64 (a lane group
-        // more, for the last load's zeros)
-        let mut converted = [[0.0f64; 3 * SEGMENT + LANES]; 3];
+        // each scalar column's values of a segment, as f64 (whole lane
+        // groups: the last one's zeros fit, as a segment's length is a
+        // multiple of LANES)
+        const { assert!(3 * SEGMENT % LANES == 0) };
+        let mut converted = [[0.0f64; 3 * SEGMENT]; 3];
         for (q, yj) in y.chunks_exact_mut(3 * VECTORS).enumerate() {
             let (rows, column) = structure.column(first + q, values);
             let stride = 3 * rows.len();
