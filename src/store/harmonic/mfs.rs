@@ -32,7 +32,6 @@ use std::cell::RefCell;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::linalg::matmul::matmul;
-use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::reborrow::IntoConst;
 use faer::{Accum, Conj, MatMut, MatRef, Par};
@@ -245,20 +244,13 @@ pub(super) fn fit_by<const D: usize>(
         }
         let a = MatRef::from_column_major_slice(a, m, cols);
         let rhs = MatMut::from_column_major_slice_mut(rhs, m, k);
-        let solution = |c: &mut [f64], x: MatRef<f64>| {
-            for (r, row) in c.chunks_exact_mut(k).enumerate() {
-                row.iter_mut().enumerate().for_each(|(col, c)| *c = x[(r, col)]);
-            }
-        };
         let method = methods.iter().copied().find(|method| match method {
             Method::NormalEquations => {
-                let Some(x) = solve_normal_equations(a, rhs.as_ref(), gram, values, stack) else { return false };
-                solution(&mut coefficients, x);
-                true
+                solve_normal_equations(a, rhs.as_ref(), gram, &mut coefficients, stack).is_some()
             }
             Method::Qr => {
                 let Some(x) = solve_qr(a, rhs.as_ref(), gram, values, stack) else { return false };
-                solution(&mut coefficients, x);
+                MatMut::from_row_major_slice_mut(&mut coefficients, cols, k).copy_from(x);
                 true
             }
         })?;
@@ -293,41 +285,48 @@ pub(super) fn fit_by<const D: usize>(
     Some((Fit { centres, coefficients, k }, method, error))
 }
 
+/// Rows of the normal equations' matrix `aᵀa` formed by one product each
+/// ([`solve_normal_equations`]). On a 24-node element (628 x 252 kernel
+/// matrix) panels of 16 to 24 rows took 0.54 ms where faer's triangular
+/// product took 0.68 and the full square 1.07 (one core, Intel Xeon): the
+/// panels do the lower triangle's work plus the small blocks on its
+/// diagonal, with the wide products the matrix-product kernels run best.
+const GRAM_PANEL: usize = 24;
+
 /// The least-squares solution of `a x = rhs` by the normal equations
-/// `aᵀa x = aᵀ rhs` (only `aᵀa`'s lower triangle is formed, into `gram`;
-/// `x` is written into `out`, `cols x k`); `None` when the Cholesky factor
-/// fails or its diagonal spans more than [`NORMAL_EQUATIONS_MAX_RATIO`].
-fn solve_normal_equations<'o>(
+/// `aᵀa x = aᵀ rhs`, written into `out` (row-major `cols x k`, the fit's
+/// coefficients). `aᵀa`'s lower triangle is formed into `gram` by panels of
+/// [`GRAM_PANEL`] rows (the blocks on the diagonal whole; their upper
+/// halves are never read), the right-hand side as `(rhsᵀ a)ᵀ` straight
+/// into `out` (0.09 ms on a 24-node element against 0.16 for `aᵀ rhs` into
+/// a column-major matrix, and the triangular solves run faster on it).
+/// `None` when the Cholesky factor fails or its diagonal spans more than
+/// [`NORMAL_EQUATIONS_MAX_RATIO`].
+fn solve_normal_equations(
     a: MatRef<f64>,
     rhs: MatRef<f64>,
     gram: &mut [f64],
-    out: &'o mut [f64],
+    out: &mut [f64],
     stack: &mut MemStack,
-) -> Option<MatRef<'o, f64>> {
+) -> Option<()> {
     let cols = a.ncols();
     let mut g = MatMut::from_column_major_slice_mut(&mut gram[..cols * cols], cols, cols);
-    let full = BlockStructure::Rectangular;
-    triangular::matmul(
-        g.as_mut(),
-        BlockStructure::TriangularLower,
-        Accum::Replace,
-        a.transpose(),
-        full,
-        a,
-        full,
-        1.0,
-        Par::Seq,
-    );
+    for first in (0..cols).step_by(GRAM_PANEL) {
+        let rows = GRAM_PANEL.min(cols - first);
+        let end = first + rows;
+        let panel = g.as_mut().submatrix_mut(first, 0, rows, end);
+        matmul(panel, Accum::Replace, a.subcols(first, rows).transpose(), a.subcols(0, end), 1.0, Par::Seq);
+    }
     llt::factor::cholesky_in_place(g.as_mut(), Default::default(), Par::Seq, stack, Default::default()).ok()?;
     let diagonal = (0..cols).map(|i| g[(i, i)]);
     let (lo, hi) = diagonal.fold((f64::INFINITY, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
     if !(lo > 0.0 && hi <= NORMAL_EQUATIONS_MAX_RATIO * lo) {
         return None;
     }
-    let mut x = MatMut::from_column_major_slice_mut(&mut out[..cols * rhs.ncols()], cols, rhs.ncols());
-    matmul(x.as_mut(), Accum::Replace, a.transpose(), rhs, 1.0, Par::Seq);
-    llt::solve::solve_in_place_with_conj(g.as_ref(), Conj::No, x.as_mut(), Par::Seq, stack);
-    Some(x.into_const())
+    let mut x = MatMut::from_row_major_slice_mut(&mut out[..cols * rhs.ncols()], cols, rhs.ncols());
+    matmul(x.as_mut().transpose_mut(), Accum::Replace, rhs.transpose(), a, 1.0, Par::Seq);
+    llt::solve::solve_in_place_with_conj(g.as_ref(), Conj::No, x, Par::Seq, stack);
+    Some(())
 }
 
 /// The least-squares solution of `a x = rhs` by a Householder QR
