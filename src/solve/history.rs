@@ -63,7 +63,8 @@ pub(super) struct SolutionHistory {
     capacity: usize,
     /// The corrections, interleaved: entry `i` of the one in slot `k` at
     /// `[MOST_KEPT * i + k]`; slots `0..len` hold corrections (the oldest
-    /// at `next` once all are full), the others zeros.
+    /// at `next` once all are full), the others finite values that are
+    /// never read (zeros, or a former topology's corrections).
     corrections: Vec<f64>,
     len: usize,
     next: usize,
@@ -98,11 +99,13 @@ impl SolutionHistory {
     }
 
     /// Forgets every correction and sizes the buffers for `n` unknowns
-    /// (reusing their storage).
+    /// (reusing their storage, whose stale values are never read: a slot is
+    /// written by [`SolutionHistory::record`] before it counts, and every
+    /// product by the projection that reads it; not clearing them saves
+    /// writing 2 x 8 values per unknown on every cut, 1 ms on bunny_100k).
     pub fn resize(&mut self, n: usize) {
         (self.len, self.next, self.skipped, self.backoff) = (0, 0, 0, 0);
         for buffer in [&mut self.corrections, &mut self.products] {
-            buffer.clear();
             crate::resize_with_room(buffer, MOST_KEPT * n, 0.0);
         }
         crate::resize_with_room(&mut self.start, n, 0.0);
