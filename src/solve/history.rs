@@ -10,9 +10,10 @@
 //! r` makes the new error the smallest in the energy norm over `x + span
 //! V` (so never larger than the guess's own). The corrections are stored
 //! interleaved, so that one read of the matrix makes all their products
-//! ([`block_products_of_vectors`]), and two passes over them do the rest;
-//! the matrix is the current one, so nothing is assumed of how it
-//! changed. A correction whose part energy-orthogonal to the older ones is
+//! ([`block_products_of_vectors`]), and two passes over them do the rest
+//! (or one, [`SolutionHistory::project_summed`], when a pass over the
+//! matrix that has other work made the products and their sums); the
+//! matrix is the current one, so nothing is assumed of how it changed. A correction whose part energy-orthogonal to the older ones is
 //! below [`DEPENDENT`] of its own energy adds nothing and is left out of
 //! the solve.
 //!
@@ -73,22 +74,54 @@ pub(super) struct SolutionHistory {
     products: Vec<f64>,
     /// The guess the current solve started from.
     start: Vec<f64>,
-    /// Per-chunk sums of `Vᵀ A V` (lower triangle, row by row) and `Vᵀ r`.
-    partial: Vec<f64>,
+    /// Per-chunk sums of `Vᵀ A V` and `Vᵀ r`.
+    partial: Vec<ProjectionSums>,
     /// Solves left to sit out, and how many the next failure sits out.
     skipped: usize,
     backoff: usize,
 }
 
-/// The slots of the unknowns `range` of interleaved vectors `a`, one
-/// unknown at a time.
-fn unknowns(a: &[f64], range: std::ops::Range<usize>) -> std::slice::ChunksExact<'_, f64> {
-    a[MOST_KEPT * range.start..MOST_KEPT * range.end].chunks_exact(MOST_KEPT)
-}
-
 /// Entries of the lower triangle of `Vᵀ A V` and of `Vᵀ r` for `s` corrections.
 const fn sums_len(s: usize) -> usize {
     s * (s + 1) / 2 + s
+}
+
+/// The sums a projection solves with, slot by slot: `Vᵀ A V` (every pair)
+/// and `Vᵀ r`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct ProjectionSums {
+    gram: [f64; MOST_KEPT * MOST_KEPT],
+    projected: [f64; MOST_KEPT],
+}
+
+impl Default for ProjectionSums {
+    fn default() -> Self {
+        ProjectionSums { gram: [0.0; MOST_KEPT * MOST_KEPT], projected: [0.0; MOST_KEPT] }
+    }
+}
+
+impl ProjectionSums {
+    /// The sums over the unknowns whose corrections are `v`, their products
+    /// `a_v` (both interleaved) and residuals `r`, in one pass over them in
+    /// order.
+    pub fn of(v: &[f64], a_v: &[f64], r: &[f64]) -> Self {
+        let mut sums = ProjectionSums::default();
+        let rows = v.chunks_exact(MOST_KEPT).zip(a_v.chunks_exact(MOST_KEPT));
+        for ((v, a_v), r) in rows.zip(r) {
+            for (i, gram) in sums.gram.chunks_exact_mut(MOST_KEPT).enumerate() {
+                gram.iter_mut().zip(a_v).for_each(|(g, a_v)| *g += v[i] * a_v);
+                sums.projected[i] += v[i] * r;
+            }
+        }
+        sums
+    }
+
+    /// The sums of two sets of unknowns.
+    pub fn plus(mut self, other: Self) -> Self {
+        self.gram.iter_mut().zip(other.gram).for_each(|(a, b)| *a += b);
+        self.projected.iter_mut().zip(other.projected).for_each(|(a, b)| *a += b);
+        self
+    }
 }
 
 impl SolutionHistory {
@@ -109,7 +142,7 @@ impl SolutionHistory {
             crate::resize_with_room(buffer, MOST_KEPT * n, 0.0);
         }
         crate::resize_with_room(&mut self.start, n, 0.0);
-        self.partial.resize(n.div_ceil(CHUNK) * sums_len(self.capacity), 0.0);
+        self.partial.resize(n.div_ceil(CHUNK), ProjectionSums::default());
     }
 
     /// Notes the guess `x` a solve starts from.
@@ -151,6 +184,20 @@ impl SolutionHistory {
         self.len > 0
     }
 
+    /// Whether the next solve projects, unless its guess already meets
+    /// the goal (what [`SolutionHistory::wanted`] then answers).
+    pub fn would_project(&self) -> bool {
+        self.skipped == 0 && self.len > 0
+    }
+
+    /// The corrections and the buffer of their products, interleaved, for
+    /// the products to be made by a pass over the matrix that has other
+    /// work (the next [`SolutionHistory::project`] then takes them as they
+    /// are: its `products` does nothing).
+    pub fn products_to_make(&mut self) -> (&[f64], &mut [f64]) {
+        (&self.corrections, &mut self.products)
+    }
+
     /// Takes note of how much of the residual's norm a projection left (a
     /// history not yet full is not judged: its newest corrections are the
     /// ones that predict).
@@ -172,14 +219,35 @@ impl SolutionHistory {
     /// way. Returns whether it did (not without corrections of `x`'s
     /// length, nor when none has energy or the correction is not finite).
     pub fn project(&mut self, products: impl FnOnce(&[f64], &mut [f64]), x: &mut [f64], r: &mut [f64]) -> bool {
+        if self.len == 0 || x.len() != self.start.len() || r.len() != x.len() {
+            return false;
+        }
+        products(&self.corrections, &mut self.products);
+        // every v_i · (A v_j) and v_i · r per chunk of unknowns, in one pass
+        // over its rows, the chunks' sums then in order
+        let (corrections, products) = (&self.corrections, &self.products);
+        let chunks = r.len().div_ceil(CHUNK);
+        self.partial[..chunks].par_iter_mut().enumerate().for_each(|(c, sums)| {
+            let range = c * CHUNK..(c * CHUNK + CHUNK).min(r.len());
+            let interleaved = MOST_KEPT * range.start..MOST_KEPT * range.end;
+            *sums = ProjectionSums::of(&corrections[interleaved.clone()], &products[interleaved], &r[range]);
+        });
+        let sums = self.partial[..chunks].iter().fold(ProjectionSums::default(), |a, &b| a.plus(b));
+        self.project_summed(&sums, x, r)
+    }
+
+    /// [`SolutionHistory::project`] with the products of the corrections
+    /// made by the caller (into the buffer of
+    /// [`SolutionHistory::products_to_make`]) and summed into `sums`
+    /// (`r` the residual they were summed with).
+    pub fn project_summed(&mut self, sums: &ProjectionSums, x: &mut [f64], r: &mut [f64]) -> bool {
         let s = self.len;
         if s == 0 || x.len() != self.start.len() || r.len() != x.len() {
             return false;
         }
-        products(&self.corrections, &mut self.products);
         // the slots oldest first
         let order: [usize; MOST_KEPT] = std::array::from_fn(|k| (self.next + k) % s);
-        let Some(y) = self.coefficients(&order[..s], r) else { return false };
+        let Some(y) = coefficients(&order[..s], sums) else { return false };
         // the coefficient of each slot
         let mut by_slot = [0.0; MOST_KEPT];
         order[..s].iter().zip(&y).for_each(|(&slot, &y)| by_slot[slot] = y);
@@ -196,73 +264,56 @@ impl SolutionHistory {
         });
         true
     }
+}
 
-    /// The solution `y` of `(Vᵀ A V) y = Vᵀ r` for the corrections in
-    /// `order`, by a Cholesky factorisation that leaves out (`y_k = 0`) each
-    /// correction the module docs call dependent; `None` when all are, or
-    /// `y` is not finite.
-    fn coefficients(&mut self, order: &[usize], r: &[f64]) -> Option<[f64; MOST_KEPT]> {
-        let s = order.len();
-        let width = sums_len(s);
-        let (corrections, products) = (&self.corrections, &self.products);
-        let chunks = r.len().div_ceil(CHUNK);
-        self.partial[..chunks * width].par_chunks_mut(width).enumerate().for_each(|(c, sums)| {
-            let range = c * CHUNK..(c * CHUNK + CHUNK).min(r.len());
-            // every v_i · (A v_j) and v_i · r of the chunk in one pass over
-            // its rows (the sums of all slot pairs, in row order)
-            let (mut gram, mut projected) = ([0.0f64; MOST_KEPT * MOST_KEPT], [0.0f64; MOST_KEPT]);
-            let rows = unknowns(corrections, range.clone()).zip(unknowns(products, range.clone()));
-            for ((v, a_v), r) in rows.zip(&r[range.clone()]) {
-                for (i, gram) in gram.chunks_exact_mut(MOST_KEPT).enumerate() {
-                    gram.iter_mut().zip(a_v).for_each(|(g, a_v)| *g += v[i] * a_v);
-                    projected[i] += v[i] * r;
-                }
-            }
-            let mut at = 0;
-            for (k, &i) in order.iter().enumerate() {
-                for &j in &order[..=k] {
-                    sums[at] = gram[MOST_KEPT * i + j];
-                    at += 1;
-                }
-            }
-            for (k, &i) in order.iter().enumerate() {
-                sums[at + k] = projected[i];
-            }
-        });
-        let mut total = [0.0f64; sums_len(MOST_KEPT)];
-        for sums in self.partial[..chunks * width].chunks_exact(width) {
-            total.iter_mut().zip(sums).for_each(|(t, s)| *t += s);
+/// The solution `y` of `(Vᵀ A V) y = Vᵀ r` for the corrections in `order`
+/// (of the sums by slot `sums`), by a Cholesky factorisation that leaves
+/// out (`y_k = 0`) each correction the module docs call dependent; `None`
+/// when all are, or `y` is not finite.
+fn coefficients(order: &[usize], sums: &ProjectionSums) -> Option<[f64; MOST_KEPT]> {
+    let s = order.len();
+    let width = sums_len(s);
+    // the lower triangle of the slots in order, row by row, then Vᵀ r
+    let mut total = [0.0f64; sums_len(MOST_KEPT)];
+    let mut at = 0;
+    for (k, &i) in order.iter().enumerate() {
+        for &j in &order[..=k] {
+            total[at] = sums.gram[MOST_KEPT * i + j];
+            at += 1;
         }
-        // the lower triangle of Vᵀ A V, factored in place: row k's entries
-        // at k (k + 1) / 2 ..
-        let at = |k: usize, j: usize| k * (k + 1) / 2 + j;
-        let (mut l, rhs) = (total, &total[s * (s + 1) / 2..width]);
-        let mut kept = [false; MOST_KEPT];
-        for k in 0..s {
-            let energy = total[at(k, k)];
-            for j in 0..k {
-                let sum: f64 = (0..j).filter(|&q| kept[q]).map(|q| l[at(k, q)] * l[at(j, q)]).sum();
-                l[at(k, j)] = if kept[j] { (l[at(k, j)] - sum) / l[at(j, j)] } else { 0.0 };
-            }
-            let pivot = energy - (0..k).filter(|&q| kept[q]).map(|q| l[at(k, q)] * l[at(k, q)]).sum::<f64>();
-            kept[k] = energy > 0.0 && pivot > DEPENDENT * energy;
-            l[at(k, k)] = if kept[k] { pivot.sqrt() } else { 0.0 };
-        }
-        if !kept.iter().any(|&k| k) {
-            return None;
-        }
-        // L z = Vᵀ r, then Lᵀ y = z, over the kept corrections
-        let mut y = [0.0f64; MOST_KEPT];
-        for k in (0..s).filter(|&k| kept[k]) {
-            let sum: f64 = (0..k).filter(|&q| kept[q]).map(|q| l[at(k, q)] * y[q]).sum();
-            y[k] = (rhs[k] - sum) / l[at(k, k)];
-        }
-        for k in (0..s).rev().filter(|&k| kept[k]) {
-            let sum: f64 = (k + 1..s).filter(|&q| kept[q]).map(|q| l[at(q, k)] * y[q]).sum();
-            y[k] = (y[k] - sum) / l[at(k, k)];
-        }
-        y.iter().all(|y| y.is_finite()).then_some(y)
     }
+    for (k, &i) in order.iter().enumerate() {
+        total[at + k] = sums.projected[i];
+    }
+    // the lower triangle of Vᵀ A V, factored in place: row k's entries
+    // at k (k + 1) / 2 ..
+    let at = |k: usize, j: usize| k * (k + 1) / 2 + j;
+    let (mut l, rhs) = (total, &total[s * (s + 1) / 2..width]);
+    let mut kept = [false; MOST_KEPT];
+    for k in 0..s {
+        let energy = total[at(k, k)];
+        for j in 0..k {
+            let sum: f64 = (0..j).filter(|&q| kept[q]).map(|q| l[at(k, q)] * l[at(j, q)]).sum();
+            l[at(k, j)] = if kept[j] { (l[at(k, j)] - sum) / l[at(j, j)] } else { 0.0 };
+        }
+        let pivot = energy - (0..k).filter(|&q| kept[q]).map(|q| l[at(k, q)] * l[at(k, q)]).sum::<f64>();
+        kept[k] = energy > 0.0 && pivot > DEPENDENT * energy;
+        l[at(k, k)] = if kept[k] { pivot.sqrt() } else { 0.0 };
+    }
+    if !kept.iter().any(|&k| k) {
+        return None;
+    }
+    // L z = Vᵀ r, then Lᵀ y = z, over the kept corrections
+    let mut y = [0.0f64; MOST_KEPT];
+    for k in (0..s).filter(|&k| kept[k]) {
+        let sum: f64 = (0..k).filter(|&q| kept[q]).map(|q| l[at(k, q)] * y[q]).sum();
+        y[k] = (rhs[k] - sum) / l[at(k, k)];
+    }
+    for k in (0..s).rev().filter(|&k| kept[k]) {
+        let sum: f64 = (k + 1..s).filter(|&q| kept[q]).map(|q| l[at(q, k)] * y[q]).sum();
+        y[k] = (y[k] - sum) / l[at(k, k)];
+    }
+    y.iter().all(|y| y.is_finite()).then_some(y)
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 
 use std::ops::Range;
 
+use cleave_kernels::spmv::BlockColumns;
 use rayon::prelude::*;
 
 use super::BlockStructure;
@@ -179,6 +180,10 @@ pub(super) struct Renumbering {
     /// Per block of the new structure, in its order: the place of the same
     /// block among the rows of its old column.
     source: Vec<u32>,
+    /// Per new block column, its old column's rows in their old order,
+    /// numbered in the new numbering: with `old_start`, the old values read
+    /// as the new columns (see [`Renumbering::old_columns`]).
+    unsorted: Vec<u32>,
     /// The renumbered structure.
     blocks: BlockStructure,
     /// Per new block column, the place of its diagonal block among its
@@ -271,25 +276,29 @@ impl Renumbering {
         let total = old.rows_len();
         crate::resize_with_room(&mut blocks.rows, total, 0);
         crate::resize_with_room(&mut self.source, total, 0);
+        crate::resize_with_room(&mut self.unsorted, total, 0);
         // each task sorts its columns' rows into their new numbers, or
         // reuses the last sorted permutation of a column that did not change
         let (order, rank) = (&self.order, &self.rank);
         let last = kept.then_some(&self.last);
-        let sort = |columns: Range<usize>, rows: &mut [u32], source: &mut [u32]| {
+        let sort = |columns: Range<usize>, (rows, (source, unsorted)): (Along<u32>, (Along<u32>, Along<u32>))| {
+            let (rows, source, unsorted) = (rows.0, source.0, unsorted.0);
             let mut at = 0;
             for j in columns {
                 let o = order[j] as usize;
                 let column = old.column_rows(o);
+                let renumbered = &mut unsorted[at..at + column.len()];
+                renumbered.iter_mut().zip(column).for_each(|(u, &r)| *u = rank[r as usize]);
                 if let Some(permutation) = last.filter(|_| o < before).and_then(|last| last.unchanged(o, column)) {
                     for (k, &q) in permutation.iter().enumerate() {
-                        (rows[at + k], source[at + k]) = (rank[column[q as usize] as usize], q);
+                        (rows[at + k], source[at + k]) = (renumbered[q as usize], q);
                     }
                     at += column.len();
                     continue;
                 }
                 // (a column's rows are distinct: an unstable sort is exact)
                 let mut pairs: smallvec::SmallVec<[(u32, u32); 64]> =
-                    column.iter().enumerate().map(|(q, &r)| (rank[r as usize], q as u32)).collect();
+                    renumbered.iter().enumerate().map(|(q, &r)| (r, q as u32)).collect();
                 pairs.sort_unstable();
                 for (k, (r, q)) in pairs.into_iter().enumerate() {
                     (rows[at + k], source[at + k]) = (r, q);
@@ -297,7 +306,9 @@ impl Renumbering {
                 at += column.len();
             }
         };
-        in_column_tasks(&blocks.ptr, 0..n, (1, 0), &mut blocks.rows, (1, 0), &mut self.source, &sort, |(), ()| ());
+        let parts =
+            (Along::blocks(&mut blocks.rows), (Along::blocks(&mut self.source), Along::blocks(&mut self.unsorted)));
+        in_column_tasks(&blocks.ptr, 0..n, parts, &sort, &|(), ()| ());
         // the place of every new column's diagonal block among its rows
         let (rows, ptr) = (&blocks.rows, &blocks.ptr);
         self.diagonal.clear();
@@ -337,43 +348,64 @@ impl Renumbering {
         &self.rank
     }
 
+    /// The values laid out on the old structure read as the new block
+    /// columns: new column `j` is old column `order[j]`, its rows in their
+    /// old order but numbered in the new numbering (so a product with it
+    /// takes and gives vectors in the new numbering, summed as on the old
+    /// structure).
+    pub fn old_columns(&self) -> BlockColumns<'_> {
+        BlockColumns { ptr: &self.blocks.ptr, rows: &self.unsorted, start: &self.old_start }
+    }
+
     /// Writes the values `old` (laid out on the old structure) in the new
     /// layout rounded to `f32` into `rounded`, and `diagonal(block)` of
     /// every diagonal block (row-major, from the `f64` values) into
-    /// `diagonals`, in the new numbering; returns whether every value is
-    /// finite and whether every rounded one is (a finite value beyond
-    /// `f32`'s range rounds to infinity). Every block column must hold its
-    /// diagonal block ([`Renumbering::missing_diagonal`]).
-    pub fn round_values<D: Send>(
+    /// `diagonals`, in the new numbering. Each parallel task of columns
+    /// then calls `task_done(columns, parts)` with its stretch of the
+    /// arrays `parts` while its columns' values are still in the cache (to
+    /// take products with them on [`Renumbering::old_columns`]); their
+    /// results are combined in column order. Returns whether every value
+    /// is finite, whether every rounded one is (a finite value beyond
+    /// `f32`'s range rounds to infinity), and the tasks' combined result.
+    /// Every block column must hold its diagonal block
+    /// ([`Renumbering::missing_diagonal`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn round_values<D: Send, P: AlongColumns, R: Send>(
         &self,
         old: &[f64],
         rounded: &mut [f32],
         diagonals: &mut [D],
         diagonal: impl Fn([f64; 9]) -> D + Sync,
-    ) -> (bool, bool) {
-        let in_range = self.carry(
+        parts: P,
+        task_done: impl Fn(Range<usize>, &mut P) -> R + Sync,
+        combine: impl Fn(R, R) -> R + Sync,
+    ) -> (bool, bool, R) {
+        let column_done = |j: usize, q: usize, column: &[f64], out: &[f32], (diagonals, _): &mut (Along<D>, P)| {
+            let (stride, at) =
+                (column.len() / 3, 3 * self.source[self.blocks.ptr[j] as usize + self.diagonal[j] as usize] as usize);
+            let block = std::array::from_fn(|e| column[(e % 3) * stride + at + e / 3]);
+            diagonals.0[q] = diagonal(block);
+            out.iter().all(|v| v.is_finite())
+        };
+        let parts = (Along::columns(diagonals, 1), parts);
+        let (in_range, result) = self.carry(
             old,
             rounded,
             |v| v as f32,
-            diagonals,
-            |j, column, out| {
-                let (stride, q) = (
-                    column.len() / 3,
-                    3 * self.source[self.blocks.ptr[j] as usize + self.diagonal[j] as usize] as usize,
-                );
-                let block = std::array::from_fn(|e| column[(e % 3) * stride + q + e / 3]);
-                (diagonal(block), out.iter().all(|v| v.is_finite()))
-            },
+            parts,
+            column_done,
+            |columns, (_, parts)| task_done(columns, parts),
+            combine,
         );
         // (every rounded value finite: then so is every value; else the
         // values themselves are looked at)
-        (in_range || old.par_iter().all(|v| v.is_finite()), in_range)
+        (in_range || old.par_iter().all(|v| v.is_finite()), in_range, result)
     }
 
     /// Writes the values `old` (laid out on the old structure) in the new
     /// layout into `out`.
     pub fn carry_exact(&self, old: &[f64], out: &mut [f64]) {
-        self.carry(old, out, |v| v, &mut [], |_, _, _| ((), true));
+        self.carry(old, out, |v| v, (), |_, _, _, _, _| true, |_, _| (), |(), ()| ());
     }
 
     /// The old number of the first block whose column has no diagonal
@@ -384,27 +416,32 @@ impl Renumbering {
     }
 
     /// Writes `convert(v)` for every value `v` of `old` (laid out on the
-    /// old structure) into `out` in the new layout, and `column_done(j,
-    /// old column j, its new values)` of every new block column `j` into
-    /// `done` (one per column, or none at all); returns whether the
-    /// check it returns held for every column.
-    fn carry<T: Copy + Send, D: Send>(
+    /// old structure) into `out` in the new layout, and calls
+    /// `column_done(j, q, old column j, its new values, parts)` for every
+    /// new block column `j` once it is written, the `q`-th column of its
+    /// task, with the task's stretch of the arrays `parts`, and
+    /// `task_done(columns, parts)` once a task's columns are; returns
+    /// whether the check `column_done` returns held for every column, and
+    /// the results of `task_done` combined in column order.
+    #[allow(clippy::too_many_arguments)]
+    fn carry<T: Copy + Send, P: AlongColumns, R: Send>(
         &self,
         old: &[f64],
         out: &mut [T],
         convert: impl Fn(f64) -> T + Sync,
-        done: &mut [D],
-        column_done: impl Fn(usize, &[f64], &[T]) -> (D, bool) + Sync,
-    ) -> bool {
+        parts: P,
+        column_done: impl Fn(usize, usize, &[f64], &[T], &mut P) -> bool + Sync,
+        task_done: impl Fn(Range<usize>, &mut P) -> R + Sync,
+        combine: impl Fn(R, R) -> R + Sync,
+    ) -> (bool, R) {
         let blocks = &self.blocks;
         let n = blocks.len();
-        let per_column = usize::from(!done.is_empty());
         let old_column = |j: usize| {
             let stride = 3 * (blocks.ptr[j + 1] - blocks.ptr[j]) as usize;
             &old[self.old_start[j]..self.old_start[j] + 3 * stride]
         };
-        let carry = |columns: Range<usize>, out: &mut [T], done: &mut [D]| {
-            let (mut at, mut checked, first) = (0, true, columns.start);
+        let carry = |columns: Range<usize>, (out, mut parts): (Along<T>, P)| {
+            let (out, mut at, mut checked, first) = (out.0, 0, true, columns.start);
             for j in columns.clone() {
                 // (the old columns lie all over the values: the next one's
                 // lines are asked for while this one is carried)
@@ -422,16 +459,13 @@ impl Renumbering {
                         (to[0], to[1], to[2]) = (convert(from[0]), convert(from[1]), convert(from[2]));
                     }
                 }
-                let (d, check) = column_done(j, column, out);
-                if per_column == 1 {
-                    done[j - first] = d;
-                }
-                checked &= check;
+                checked &= column_done(j, j - first, column, out, &mut parts);
                 at += 3 * stride;
             }
-            checked
+            (checked, task_done(columns, &mut parts))
         };
-        in_column_tasks(&blocks.ptr, 0..n, (9, 0), out, (0, per_column), done, &carry, |a, b| a && b)
+        let combine = |(a, x): (bool, R), (b, y): (bool, R)| (a && b, combine(x, y));
+        in_column_tasks(&blocks.ptr, 0..n, (Along::values(out), parts), &carry, &combine)
     }
 
     /// `new[b] = old[order[b]]`: a vector of the old numbering in the new.
@@ -460,33 +494,76 @@ impl SortedColumns {
     }
 }
 
+/// Arrays laid out along the block columns, which [`in_column_tasks`]
+/// splits between its tasks.
+pub(super) trait AlongColumns: Send + Sized {
+    /// The stretch of the first `blocks` blocks and `columns` columns, and
+    /// the rest.
+    fn split(self, blocks: usize, columns: usize) -> (Self, Self);
+}
+
+/// An array of `per_block` items for each block of the columns and
+/// `per_column` for each column (an empty array: none).
+pub(super) struct Along<'a, T>(pub &'a mut [T], usize, usize);
+
+impl<'a, T> Along<'a, T> {
+    /// One item per block.
+    fn blocks(items: &'a mut [T]) -> Self {
+        Along(items, 1, 0)
+    }
+
+    /// The nine values of each block.
+    fn values(items: &'a mut [T]) -> Self {
+        Along(items, 9, 0)
+    }
+
+    /// `per_column` items per column, or none when `items` is empty.
+    pub fn columns(items: &'a mut [T], per_column: usize) -> Self {
+        let per_column = if items.is_empty() { 0 } else { per_column };
+        Along(items, 0, per_column)
+    }
+}
+
+impl<T: Send> AlongColumns for Along<'_, T> {
+    fn split(self, blocks: usize, columns: usize) -> (Self, Self) {
+        let Along(items, per_block, per_column) = self;
+        let (first, rest) = items.split_at_mut(per_block * blocks + per_column * columns);
+        (Along(first, per_block, per_column), Along(rest, per_block, per_column))
+    }
+}
+
+impl<A: AlongColumns, B: AlongColumns> AlongColumns for (A, B) {
+    fn split(self, blocks: usize, columns: usize) -> (Self, Self) {
+        let ((a0, a1), (b0, b1)) = (self.0.split(blocks, columns), self.1.split(blocks, columns));
+        ((a0, b0), (a1, b1))
+    }
+}
+
+impl AlongColumns for () {
+    fn split(self, _: usize, _: usize) -> (Self, Self) {
+        ((), ())
+    }
+}
+
 /// Runs `task` on ranges of at most [`TASK_COLUMNS`] block columns of
-/// `columns` in parallel, each with its parts of `a` and `b` (two arrays
-/// laid out along the columns: `(per block, per column)` entries as
-/// `a_layout` and `b_layout` say, the columns' block offsets `ptr`),
-/// halving the range (without allocating); combines the tasks' results in
-/// column order.
-#[allow(clippy::too_many_arguments)]
-fn in_column_tasks<A: Send, B: Send, R: Send>(
+/// `columns` in parallel, each with its stretch of `parts` (the columns'
+/// block offsets `ptr`), halving the range (without allocating); combines
+/// the tasks' results in column order.
+fn in_column_tasks<P: AlongColumns, R: Send>(
     ptr: &[u32],
     columns: Range<usize>,
-    a_layout: (usize, usize),
-    a: &mut [A],
-    b_layout: (usize, usize),
-    b: &mut [B],
-    task: &(impl Fn(Range<usize>, &mut [A], &mut [B]) -> R + Sync),
-    combine: fn(R, R) -> R,
+    parts: P,
+    task: &(impl Fn(Range<usize>, P) -> R + Sync),
+    combine: &(impl Fn(R, R) -> R + Sync),
 ) -> R {
     if columns.len() <= TASK_COLUMNS {
-        return task(columns, a, b);
+        return task(columns, parts);
     }
     let mid = columns.start + columns.len() / 2;
-    let (blocks, count) = ((ptr[mid] - ptr[columns.start]) as usize, mid - columns.start);
-    let split = |(per_block, per_column): (usize, usize)| per_block * blocks + per_column * count;
-    let ((a0, a1), (b0, b1)) = (a.split_at_mut(split(a_layout)), b.split_at_mut(split(b_layout)));
+    let (first, rest) = parts.split((ptr[mid] - ptr[columns.start]) as usize, mid - columns.start);
     let (left, right) = rayon::join(
-        || in_column_tasks(ptr, columns.start..mid, a_layout, a0, b_layout, b0, task, combine),
-        || in_column_tasks(ptr, mid..columns.end, a_layout, a1, b_layout, b1, task, combine),
+        || in_column_tasks(ptr, columns.start..mid, first, task, combine),
+        || in_column_tasks(ptr, mid..columns.end, rest, task, combine),
     );
     combine(left, right)
 }
@@ -673,6 +750,55 @@ mod tests {
         }
     }
 
+    /// [`Renumbering::round_values`] with no products: whether every value
+    /// is finite, and every rounded one.
+    fn round(
+        renumbering: &Renumbering,
+        values: &[f64],
+        rounded: &mut [f32],
+        diagonals: &mut [[f64; 9]],
+    ) -> (bool, bool) {
+        let (finite, in_range, ()) =
+            renumbering.round_values(values, rounded, diagonals, |b| b, (), |_, _| (), |(), ()| ());
+        (finite, in_range)
+    }
+
+    /// The old values read as the new columns ([`Renumbering::old_columns`])
+    /// multiply a vector in the new numbering as the old structure
+    /// multiplies it in the old one, bit for bit (the same sums in the
+    /// same order), within the tasks of a pass that carries them; the
+    /// tasks' results combine over every column once.
+    #[test]
+    fn products_on_the_old_values_in_the_new_numbering_are_the_old_products() {
+        let old = shuffled_grid(6);
+        let values: Vec<f64> = (0..9 * old.rows_len()).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.01).collect();
+        let mut renumbering = Renumbering::default();
+        renumbering.renew(&old);
+        let n = old.len();
+        let x_old: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut x_new = vec![[0.0; 3]; n];
+        let as_blocks = |v: &[f64]| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>();
+        renumbering.to_new(&as_blocks(&x_old), &mut x_new);
+        let x_new: Vec<f64> = x_new.concat();
+        let mut y_old = vec![0.0; 3 * n];
+        cleave_kernels::spmv::block_products(old.columns(), &values, &x_old, 0, &mut y_old);
+        let (mut rounded, mut diagonals, mut y_new) = (vec![0.0f32; values.len()], vec![[0.0; 9]; n], vec![0.0; 3 * n]);
+        let view = renumbering.old_columns();
+        let task = |columns: Range<usize>, y: &mut Along<f64>| {
+            cleave_kernels::spmv::block_products(view, &values, &x_new, columns.start, y.0);
+            columns.len()
+        };
+        let parts = Along::columns(&mut y_new, 3);
+        let (finite, _, columns) =
+            renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b, parts, task, |a, b| a + b);
+        assert!(finite);
+        assert_eq!(columns, n);
+        for (new, &o) in renumbering.order().iter().enumerate() {
+            let o = o as usize;
+            assert_eq!(y_new[3 * new..3 * new + 3], y_old[3 * o..3 * o + 3], "block {o}, new {new}");
+        }
+    }
+
     /// The carried values are the renumbered matrix `Q A Qᵀ`, entry by
     /// entry, and their `f32` roundings; every column's rows ascend; the
     /// vector maps are each other's inverse; a value that is not finite,
@@ -695,7 +821,7 @@ mod tests {
         renumbering.renew(&old);
         let (mut out, mut rounded) = (vec![0.0; values.len()], vec![0.0f32; values.len()]);
         let mut diagonals = vec![[0.0; 9]; old.len()];
-        assert_eq!(renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b), (true, true));
+        assert_eq!(round(&renumbering, &values, &mut rounded, &mut diagonals), (true, true));
         renumbering.carry_exact(&values, &mut out);
         let (new, order) = (renumbering.blocks(), renumbering.order());
         for j in 0..new.len() {
@@ -721,9 +847,9 @@ mod tests {
         assert_eq!(back, v);
         assert_eq!(there[0], v[order[0] as usize]);
         values[17] = 1e39;
-        assert_eq!(renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b), (true, false));
+        assert_eq!(round(&renumbering, &values, &mut rounded, &mut diagonals), (true, false));
         values[17] = f64::NAN;
-        assert!(!renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b).0);
+        assert!(!round(&renumbering, &values, &mut rounded, &mut diagonals).0);
     }
 
     #[test]
