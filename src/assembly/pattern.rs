@@ -676,12 +676,17 @@ impl SparsePattern {
     where
         F: Fn(usize, usize, usize, &mut [[f64; 9]]) + Sync,
     {
-        self.assemble_prefetched(values, blocks, |_, _| {});
+        self.assemble_prefetched(values, blocks, |_, _| {}, |_| [0.0; 3]);
     }
 
     /// [`SparsePattern::assemble`], calling `prefetch(batch, element)` a few
     /// incidences before `blocks` reads that element, so that its data is
-    /// on its way to the cache (a hint: results do not depend on it).
+    /// on its way to the cache (a hint: results do not depend on it), and
+    /// adding `diagonal(j)` to the three diagonal entries of node `j` once
+    /// its column is summed (a mass term: added while the column is in the
+    /// cache, where a pass over the diagonals after the assembly took 0.9
+    /// ms of a bunny_100k step on one thread, missing the cache at every
+    /// node).
     ///
     /// The sums go straight into `values`, value by value. Measured on
     /// bunny_100k (2 threads, Intel Xeon with AVX-512), these variants were
@@ -693,10 +698,11 @@ impl SparsePattern {
     ///
     /// With constant blocks, the same code takes 2.5 ms. Writing the values
     /// (18 MB) costs about half of the assembly.
-    pub fn assemble_prefetched<F, P>(&self, values: &mut [f64], blocks: F, prefetch: P)
+    pub fn assemble_prefetched<F, P, D>(&self, values: &mut [f64], blocks: F, prefetch: P, diagonal: D)
     where
         F: Fn(usize, usize, usize, &mut [[f64; 9]]) + Sync,
         P: Fn(usize, usize) + Sync,
+        D: Fn(usize) -> [f64; 3] + Sync,
     {
         assert_eq!(values.len(), self.nnz());
         let shared = SharedValues(values.as_mut_ptr());
@@ -733,6 +739,10 @@ impl SparsePattern {
                         }
                     }
                 }
+            }
+            let (add, at) = (diagonal(j), base + self.diagonal[j] as usize);
+            for (c, add) in add.into_iter().enumerate() {
+                unsafe { *values.add(at + c * stride + c) += add };
             }
         });
     }

@@ -14,6 +14,8 @@
 //! Every buffer a step writes lives in [`StepSystem`] and is reused: after
 //! the first step of a topology, a step allocates nothing.
 
+use rayon::prelude::*;
+
 use crate::assembly::{Constraints, SparsePattern};
 use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverChoice, SolverKind};
 use crate::Error;
@@ -161,12 +163,13 @@ impl Simulation {
         let body = &self.body_loads;
         let rotation_iterations = timings.time(Phase::Forces, || forces(elements, pattern, state, warp, body, system));
         // 2.
-        timings.time(Phase::Assembly, || assemble(elements, pattern, c_k, system));
+        let masses = &self.masses;
+        timings.time(Phase::Assembly, || assemble(elements, pattern, masses, (c_k, c_m), system));
         // 3.
         let (masses, loads, gravity, boundary) = (&self.masses, &self.loads, self.params.gravity, &self.boundary);
         let points = self.contacts.as_ref();
         let contacts = timings.time(Phase::Contacts, || {
-            inertia_and_loads(pattern, masses, loads, state, gravity, h, c_m, system);
+            inertia_and_loads(masses, loads, state, gravity, h, system);
             match points {
                 None => contact(pattern, boundary, state, h, system),
                 Some((map, share)) => contact_points(pattern, boundary, map, share, state, h, system),
@@ -211,32 +214,27 @@ fn forces(
     iterations
 }
 
-/// Phase 2: the warped stiffness times `c_k = h² + h β` into the values.
-fn assemble(elements: &impl Discretization, pattern: &SparsePattern, c_k: f64, system: &mut StepSystem) {
-    let blocks = |b, i, bb, out: &mut [[f64; 9]]| elements.stiffness_column(b, i, bb, c_k, out);
-    pattern.assemble_prefetched(&mut system.values, blocks, |b, i| elements.prefetch(b, i));
-}
-
-/// Phase 3a: the mass `c_m M` on the diagonal and the right-hand side
-/// `M v + h (W g + f)`, `W` the gravity weights (the masses for nodal
-/// blocks).
-#[allow(clippy::too_many_arguments)]
-fn inertia_and_loads(
+/// Phase 2: the warped stiffness times `c_k = h² + h β` into the values,
+/// and the mass `c_m M` on their diagonal.
+fn assemble(
+    elements: &impl Discretization,
     pattern: &SparsePattern,
     masses: &[f64],
-    loads: &[f64],
-    state: &NodeState,
-    g: [f64; 3],
-    h: f64,
-    c_m: f64,
+    (c_k, c_m): (f64, f64),
     system: &mut StepSystem,
 ) {
-    for (i, (&m, &w)) in masses.iter().zip(loads).enumerate() {
-        for d in 0..3 {
-            system.values[pattern.diagonal_slot(3 * i + d)] += c_m * m;
-            system.rhs[3 * i + d] = m * state.velocity[i][d] + h * (w * g[d] + system.force[i][d]);
-        }
-    }
+    let blocks = |b, i, bb, out: &mut [[f64; 9]]| elements.stiffness_column(b, i, bb, c_k, out);
+    let mass = |j: usize| [c_m * masses.get(j).copied().unwrap_or(0.0); 3];
+    pattern.assemble_prefetched(&mut system.values, blocks, |b, i| elements.prefetch(b, i), mass);
+}
+
+/// Phase 3a: the right-hand side `M v + h (W g + f)`, `W` the gravity
+/// weights (the masses for nodal blocks).
+fn inertia_and_loads(masses: &[f64], loads: &[f64], state: &NodeState, g: [f64; 3], h: f64, system: &mut StepSystem) {
+    let blocks = system.rhs.par_chunks_mut(3).zip(&system.force).zip(&state.velocity);
+    blocks.zip(masses.par_iter().zip(loads)).for_each(|(((rhs, f), v), (&m, &w))| {
+        (0..3).for_each(|d| rhs[d] = m * v[d] + h * (w * g[d] + f[d]));
+    });
 }
 
 /// Phase 3b: every node behind a collider gets the penalty force
