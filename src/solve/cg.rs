@@ -1118,7 +1118,8 @@ impl LinearSolver for ConjugateGradient {
 
     /// Takes note of new values: the next solve carries them into the
     /// solver's layout in the pass that takes its first residual (and the
-    /// projection's products), and reports a value that is not finite.
+    /// projection's products), and that solve reports a value that is not
+    /// finite.
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
         if matrix.parts().1.len() != self.values32.len() {
             return Err(SolveError::NotReady);
