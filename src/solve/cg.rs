@@ -1352,7 +1352,9 @@ mod tests {
     /// more closely) is solved at the start, where a solver without that
     /// history iterates; a new pattern forgets it. (A uniform bar: on the
     /// soft one the error of the products on rounded values alone takes a
-    /// few iterations to remove, 12 against 54 when written.)
+    /// few iterations to remove, 12 against 54 when written.) The same
+    /// holds when the values are given again before every solve, and the
+    /// pass that carries them makes the projection's products.
     #[test]
     fn a_solve_starts_from_the_corrections_before_it() {
         let (pattern, values) = soft_bar(48, 4, 1.0);
@@ -1383,6 +1385,19 @@ mod tests {
         let first = [solve(&mut cg, &b1), solve(&mut cg, &b2)];
         cg.tolerance = 1e-6;
         let with_history = solve(&mut cg, &b3);
+        // the values given again before every solve, as a step gives them:
+        // the projection takes the products and sums of the pass that
+        // carries them (exact, so the start meets the tolerance as well)
+        let mut refactored = ready();
+        refactored.tolerance = 1e-10;
+        for b in [&b1, &b2] {
+            refactored.factor(matrix).unwrap();
+            solve(&mut refactored, b);
+        }
+        refactored.tolerance = 1e-6;
+        refactored.factor(matrix).unwrap();
+        let carried = solve(&mut refactored, &b3);
+        assert_eq!(carried, 0, "the history's start from the carrying pass's products");
         let fresh = solve(&mut ready(), &b3);
         cg.analyze(pattern.as_ref()).unwrap();
         cg.factor(matrix).unwrap();
