@@ -13,9 +13,10 @@
 //! ([`block_products_of_vectors`]), and two passes over them do the rest
 //! (or one, [`SolutionHistory::project_summed`], when a pass over the
 //! matrix that has other work made the products and their sums); the
-//! matrix is the current one, so nothing is assumed of how it changed. A correction whose part energy-orthogonal to the older ones is
-//! below [`DEPENDENT`] of its own energy adds nothing and is left out of
-//! the solve.
+//! matrix is the current one, so nothing is assumed of how it changed. A
+//! correction whose part energy-orthogonal to the older ones is below
+//! [`DEPENDENT`] of its own energy adds nothing and is left out of the
+//! solve.
 //!
 //! Where the history does not predict the next correction (a body
 //! bouncing on penalty contacts, whose active set changes from step to
@@ -192,8 +193,7 @@ impl SolutionHistory {
 
     /// The corrections and the buffer of their products, interleaved, for
     /// the products to be made by a pass over the matrix that has other
-    /// work (the next [`SolutionHistory::project`] then takes them as they
-    /// are: its `products` does nothing).
+    /// work (which sums them for [`SolutionHistory::project_summed`]).
     pub fn products_to_make(&mut self) -> (&[f64], &mut [f64]) {
         (&self.corrections, &mut self.products)
     }
