@@ -23,7 +23,7 @@ mod pattern;
 
 pub use constraints::Constraints;
 pub use couplings::{Couplings, MAX_ENTRY_BLOCKS};
-pub use pattern::SparsePattern;
+pub use pattern::{SparsePattern, Unlocated};
 
 /// Asks the CPU to bring the cache line holding `value` into its caches
 /// (a hint with no effect on results; nothing off x86-64).

@@ -207,6 +207,29 @@ const PREFETCH_AHEAD: usize = 4;
 /// An incidence not yet written.
 const UNSET: Incidence = Incidence { batch: 0, element: 0, id: 0, local: 0, size: 0, slots: 0 };
 
+/// The group and index of an incidence whose entry [`SparsePattern::locate`]
+/// has not placed yet.
+const UNLOCATED: u32 = u32::MAX;
+
+/// What an [`SparsePattern::update`] leaves for [`SparsePattern::locate`]:
+/// the recomputed columns (ascending), whose incidences are not located,
+/// and the places the changed entries left, into which the couplings may
+/// have moved other entries.
+#[derive(Debug)]
+pub struct Unlocated {
+    columns: Vec<usize>,
+    vacated: Vec<(u32, u32)>,
+}
+
+/// The blocks of the entry with a stable id, read where `couplings`
+/// locate it.
+fn located_blocks<'a, C: Couplings>(couplings: &'a C) -> impl Fn(u32) -> &'a [u32] + Sync + 'a {
+    |id| {
+        let (group, entry) = couplings.locate(id);
+        couplings.blocks(group as usize, entry as usize)
+    }
+}
+
 /// Columns per parallel task of [`SparsePattern::lay_out`].
 const LAY_OUT_RUN: usize = 256;
 
@@ -219,12 +242,13 @@ struct NewColumn {
 }
 
 impl NewColumn {
-    /// The column of node `j` touched by `incidences`.
-    fn of(j: usize, incidences: Vec<Incidence>, store: &impl Couplings) -> Self {
+    /// The column of node `j` touched by `incidences`, whose entries couple
+    /// the blocks `blocks_of(id)`.
+    fn of<'a>(j: usize, incidences: Vec<Incidence>, blocks_of: &impl Fn(u32) -> &'a [u32]) -> Self {
         // (sized once: a cut recomputes thousands of columns)
         let mut rows: Vec<u32> = Vec::with_capacity(incidences.iter().map(|inc| inc.size as usize).sum::<usize>() + 1);
         for inc in &incidences {
-            rows.extend_from_slice(store.blocks(inc.batch as usize, inc.element as usize));
+            rows.extend_from_slice(blocks_of(inc.id));
         }
         rows.push(j as u32); // lone nodes keep their diagonal
         rows.sort_unstable();
@@ -241,10 +265,10 @@ impl NewColumn {
     /// (`9 len` of `row_out`, the block rows three times over), the block
     /// rows, the incidences (their slots counted from the node's first) and
     /// the slots; returns the diagonal block's offset.
-    fn write(
+    fn write<'a>(
         &self,
         j: usize,
-        store: &impl Couplings,
+        blocks_of: &impl Fn(u32) -> &'a [u32],
         row_out: &mut [usize],
         block_out: &mut [u32],
         inc_out: &mut [Incidence],
@@ -265,7 +289,7 @@ impl NewColumn {
         let mut written = 0;
         for (out, inc) in inc_out.iter_mut().zip(&self.incidences) {
             *out = Incidence { slots: written as u32, ..*inc };
-            let nodes = store.blocks(inc.batch as usize, inc.element as usize);
+            let nodes = blocks_of(inc.id);
             for (s, &a) in slot_out[written..written + nodes.len()].iter_mut().zip(nodes) {
                 *s = position(a);
             }
@@ -387,8 +411,9 @@ impl SparsePattern {
                 }
             }
         }
-        let columns = columns.into_par_iter().enumerate().map(|(j, inc)| NewColumn::of(j, inc, store));
-        Self::lay_out(store, columns.collect())
+        let blocks_of = located_blocks(store);
+        let columns = columns.into_par_iter().enumerate().map(|(j, inc)| NewColumn::of(j, inc, &blocks_of));
+        Self::lay_out(&blocks_of, columns.collect())
     }
 
     /// The pattern of no blocks.
@@ -406,34 +431,45 @@ impl SparsePattern {
         }
     }
 
-    /// Updates the pattern after the entries `changed` (stable ids, sorted)
-    /// were rebuilt in `store` (for an element store, see
-    /// [`crate::store::ElementStore::update`]); `old_nodes` are the blocks
-    /// those entries coupled before. Only the columns of their blocks, old
-    /// and new, are recomputed, and written where they now start; the
-    /// others move as a whole, in place (`move_columns`), instead of
-    /// being copied into new arrays: a blade cut across bunny_100k (3,000
-    /// nodes touched) took 14-15 ms in this phase with copies, 8 ms in
-    /// place, and faults in no new pages until the arrays outgrow their
-    /// capacity (`grow`).
-    pub fn update(&mut self, num_blocks: usize, store: &impl Couplings, changed: &[u32], old_nodes: &[u32]) {
+    /// Updates the pattern's structure after the entries `changed` (stable
+    /// ids, sorted) changed the blocks they couple: `blocks_of(id)` are an
+    /// entry's blocks now, in its local order (none for an entry that is
+    /// gone), `old_nodes` the blocks the changed entries coupled before.
+    /// Only the columns of their blocks, old and new, are recomputed, and
+    /// written where they now start; the others move as a whole, in place
+    /// (`move_columns`), instead of being copied into new arrays: a blade
+    /// cut across bunny_100k (3,000 nodes touched) took 14-15 ms in this
+    /// phase with copies, 8 ms in place, and faults in no new pages until
+    /// the arrays outgrow their capacity (`grow`). Blocks from `num_blocks`
+    /// on are dropped (a failed cut's, when its update is undone).
+    ///
+    /// The structure needs no element data, so it is updated while the
+    /// store rebuilds the changed elements (for an element store, `blocks_of`
+    /// reads the mesh's element nodes, which the store keeps in the same
+    /// order). Where the entries sit in their groups is filled in by
+    /// [`SparsePattern::locate`] once the couplings hold them: until then
+    /// the pattern's structure (`symbolic`, [`SparsePattern::blocks`]) is
+    /// the new one, but it must not assemble.
+    #[must_use = "the pattern assembles only once its entries are located"]
+    pub fn update<'a>(
+        &mut self,
+        num_blocks: usize,
+        blocks_of: &(impl Fn(u32) -> &'a [u32] + Sync),
+        changed: &[u32],
+        old_nodes: &[u32],
+    ) -> Unlocated {
         let kept = self.num_blocks;
-        if num_blocks < kept {
-            // (blocks removed: no cut does this)
-            *self = Self::build(num_blocks, store);
-            return;
-        }
-        let mut dirty = vec![false; num_blocks];
-        old_nodes.iter().for_each(|&v| dirty[v as usize] = true);
-        dirty[kept..].fill(true);
+        // (every column at or past the new end is "recomputed": it does not move)
+        let mut dirty = vec![false; num_blocks.max(kept)];
+        old_nodes.iter().filter(|&&v| (v as usize) < num_blocks).for_each(|&v| dirty[v as usize] = true);
+        dirty[kept.min(num_blocks)..].fill(true);
         let mut added: Vec<(u32, Incidence)> = Vec::new();
         for &e in changed {
-            let (bi, i) = store.locate(e);
-            let blocks = store.blocks(bi as usize, i as usize);
+            let blocks = blocks_of(e);
             for (a, &v) in blocks.iter().enumerate() {
                 dirty[v as usize] = true;
                 let size = blocks.len() as u32;
-                let inc = Incidence { batch: bi, element: i, id: e, local: a as u32, size, slots: 0 };
+                let inc = Incidence { batch: UNLOCATED, element: UNLOCATED, id: e, local: a as u32, size, slots: 0 };
                 added.push((v, inc));
             }
         }
@@ -443,12 +479,12 @@ impl SparsePattern {
         changed.iter().for_each(|&e| is_changed[e as usize] = true);
         let was_changed = |e: u32| is_changed.get(e as usize).copied().unwrap_or(false);
         let dirty_list: Vec<usize> = (0..num_blocks).filter(|&j| dirty[j]).collect();
-        // where the changed entries sat: the store moved others into these
-        // places (a swap-remove), whose incidences are refreshed below
-        let mut vacated: Vec<(u32, u32)> = dirty_list
-            .iter()
-            .flat_map(|&j| self.column_incidences(j))
-            .filter(|inc| was_changed(inc.id))
+        // where the changed entries sat: the couplings move others into
+        // these places (a swap-remove), whose incidences `locate` refreshes
+        let mut vacated: Vec<(u32, u32)> = (0..kept)
+            .filter(|&j| dirty[j])
+            .flat_map(|j| self.column_incidences(j))
+            .filter(|inc| was_changed(inc.id) && inc.batch != UNLOCATED)
             .map(|inc| (inc.batch, inc.element))
             .collect();
         vacated.sort_unstable();
@@ -461,12 +497,8 @@ impl SparsePattern {
                 let (lo, hi) =
                     (added.partition_point(|a| (a.0 as usize) < j), added.partition_point(|a| a.0 as usize <= j));
                 let staying = this.column_incidences(j).iter().filter(|inc| !was_changed(inc.id)).copied();
-                let mut incidences: Vec<Incidence> = staying.chain(added[lo..hi].iter().map(|a| a.1)).collect();
-                // entries of other elements may have moved in their batch
-                for inc in &mut incidences {
-                    (inc.batch, inc.element) = store.locate(inc.id);
-                }
-                NewColumn::of(j, incidences, store)
+                let incidences: Vec<Incidence> = staying.chain(added[lo..hi].iter().map(|a| a.1)).collect();
+                NewColumn::of(j, incidences, blocks_of)
             })
             .collect();
         let mut which = vec![u32::MAX; num_blocks];
@@ -508,7 +540,7 @@ impl SparsePattern {
         let diagonals: Vec<u32> = (new.par_iter().zip(&dirty_list).zip(row_parts).zip(block_parts))
             .zip(inc_parts.into_par_iter().zip(slot_parts))
             .map(|((((column, &j), row_out), block_out), (inc_out, slot_out))| {
-                column.write(j, store, row_out, block_out, inc_out, slot_out)
+                column.write(j, blocks_of, row_out, block_out, inc_out, slot_out)
             })
             .collect();
         for ((&j, column), diagonal) in dirty_list.iter().zip(&new).zip(diagonals) {
@@ -517,22 +549,6 @@ impl SparsePattern {
         let n = 3 * num_blocks;
         let col_ptr = column_pointers(&values, &self.col_stride);
         (self.offsets, self.slot_offsets) = (narrow(incidences.iter().copied()), narrow(slots.iter().copied()));
-        // the elements the store moved into the vacated places
-        for &(b, i) in &vacated {
-            if (i as usize) >= store.entries(b as usize) {
-                continue;
-            }
-            let id = store.id(b as usize, i as usize);
-            if was_changed(id) {
-                continue;
-            }
-            for &v in store.blocks(b as usize, i as usize) {
-                let column = self.offsets[v as usize] as usize..self.offsets[v as usize + 1] as usize;
-                for inc in self.incidences[column].iter_mut().filter(|inc| inc.id == id) {
-                    (inc.batch, inc.element) = (b, i);
-                }
-            }
-        }
         self.num_blocks = num_blocks;
         // SAFETY: the columns follow one another from 0 to the end of the
         // rows; the kept ones were checked when laid out and only moved, the
@@ -540,6 +556,35 @@ impl SparsePattern {
         // (`NewColumn::of`)
         self.symbolic = unsafe { SymbolicSparseColMat::new_unchecked(n, n, col_ptr, None, row_idx) };
         self.blocks = block_structure(&self.symbolic, block_rows);
+        Unlocated { columns: dirty_list, vacated }
+    }
+
+    /// Locates the entries an [`SparsePattern::update`] left unlocated in
+    /// `couplings` (which now hold the changed entries): every incidence of
+    /// a recomputed column, and those of the entries the couplings moved
+    /// into the changed entries' old places.
+    pub fn locate(&mut self, couplings: &impl Couplings, unlocated: Unlocated) {
+        let Unlocated { columns, vacated } = unlocated;
+        let starts: Vec<usize> = self.offsets.iter().map(|&o| o as usize).collect();
+        let parts =
+            columns_of(&mut self.incidences, &columns, &starts, |k| starts[columns[k] + 1] - starts[columns[k]]);
+        parts.into_par_iter().with_min_len(64).for_each(|column| {
+            for inc in column {
+                (inc.batch, inc.element) = couplings.locate(inc.id);
+            }
+        });
+        for (b, i) in vacated {
+            if (i as usize) >= couplings.entries(b as usize) {
+                continue;
+            }
+            let id = couplings.id(b as usize, i as usize);
+            for &v in couplings.blocks(b as usize, i as usize) {
+                let column = self.offsets[v as usize] as usize..self.offsets[v as usize + 1] as usize;
+                for inc in self.incidences[column].iter_mut().filter(|inc| inc.id == id) {
+                    (inc.batch, inc.element) = (b, i);
+                }
+            }
+        }
     }
 
     /// The ids of the entries (elements) coupling block `j`, in the
@@ -560,7 +605,7 @@ impl SparsePattern {
     /// column written into its own stretch of the arrays, in parallel over
     /// runs of [`LAY_OUT_RUN`] columns (the arrays are the same whatever
     /// the thread count).
-    fn lay_out(store: &impl Couplings, columns: Vec<NewColumn>) -> Self {
+    fn lay_out<'a>(blocks_of: &(impl Fn(u32) -> &'a [u32] + Sync), columns: Vec<NewColumn>) -> Self {
         let num_blocks = columns.len();
         // per column: block rows, incidences, slots
         let sizes = |c: &NewColumn| [c.rows.len(), c.incidences.len(), c.slots()];
@@ -601,7 +646,7 @@ impl SparsePattern {
                         let [bs, is, ss] = sizes(&columns[j]);
                         let (row_out, block_out) = (&mut row_out[9 * b..9 * (b + bs)], &mut block_out[b..b + bs]);
                         let (inc_out, slot_out) = (&mut inc_out[i..i + is], &mut slot_out[s..s + ss]);
-                        columns[j].write(j, store, row_out, block_out, inc_out, slot_out)
+                        columns[j].write(j, blocks_of, row_out, block_out, inc_out, slot_out)
                     })
                     .collect()
             })

@@ -138,7 +138,8 @@ impl Simulation {
         };
         // the new pattern's analysis (Cholesky ordering and symbolic
         // factorisation, or the block structure of CG) makes the system
-        // ready; the cut itself stands even if that fails
+        // ready: `apply_cut` ran it, and here one that failed runs again
+        // and reports; the cut itself stands even if that fails
         let result = result.and_then(|report| {
             let (system, pattern) = (&mut self.system, &self.pattern);
             self.timings.time(Phase::Solve, || system.ensure_analysed(pattern))?;
@@ -152,13 +153,15 @@ impl Simulation {
     }
 
     /// Checks the touched elements of a cut mesh and rebuilds their data
-    /// (the store checks their health), then carries the state over to the
-    /// new nodes ([`NodeOrigins`]), updates the pattern's columns of their
-    /// nodes and the masses, restores the momenta of the nodes whose masses
+    /// (the store checks their health) while the pattern's columns of
+    /// their nodes are updated and the solver analyses the new pattern,
+    /// then carries the state over to the new nodes ([`NodeOrigins`]),
+    /// updates the masses, restores the momenta of the nodes whose masses
     /// changed, and brings the rotations (untouched elements keep theirs,
-    /// new ones get theirs) and the solvers up to date, and leaves the
-    /// boundary surface to be rebuilt when next asked for. Nothing but the
-    /// mesh has changed when it fails.
+    /// new ones get theirs) up to date, and leaves the boundary surface to
+    /// be rebuilt when next asked for. Nothing but the mesh has changed
+    /// when it fails (the pattern is put back, and the solver analyses it
+    /// again when next asked to).
     pub(super) fn apply_cut(&mut self, report: &PolygonCutReport) -> Result<(), Error> {
         let (mesh, cut) = (&self.mesh, &report.cut);
         let touched = &cut.touched;
@@ -177,15 +180,54 @@ impl Simulation {
             let message = format!("{} node states for {} nodes after a cut", origins.len(), mesh.nodes.len());
             return Err(Error::Internal(message));
         }
-        let store = &mut nodal.store;
+        // the touched elements' data (on every thread) beside the pattern's
+        // structure, which reads only the mesh, and the solver's analysis
+        // of it (mostly moving arrays, on one thread); both are undone if
+        // the store refuses an element
+        let (store, pattern, system, p) = (&mut nodal.store, &mut self.pattern, &mut self.system, &self.params);
+        let n = mesh.nodes.len();
+        let elements_of = |e: u32| mesh.elements.get(e as usize).map_or(&[][..], |el| &el.nodes[..]);
         let t = std::time::Instant::now();
-        let changes = store.update(mesh, &self.params.material, &self.params.basis, touched, &parents)?;
-        self.timings.add(Phase::Basis, t.elapsed().as_secs_f64());
+        let ((built, store_seconds), ((unlocated, pattern_seconds), ((), analysis_seconds))) = rayon::join(
+            || timed(|| store.update(mesh, &p.material, &p.basis, touched, &parents)),
+            || {
+                let update = timed(|| pattern.update(n, &elements_of, touched, &cut.old_nodes));
+                // (an analysis that fails is run again, and reported, by the caller)
+                let analysis = timed(|| {
+                    system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
+                    let _analysed = system.ensure_analysed(pattern);
+                });
+                (update, analysis)
+            },
+        );
+        // (the branches overlap: the rebuild books its time, the pattern and
+        // the analysis the time they took past it)
+        let beside = (t.elapsed().as_secs_f64() - store_seconds).max(0.0);
+        self.timings.add(Phase::Basis, store_seconds);
+        self.timings.add(Phase::Assembly, pattern_seconds.min(beside));
+        self.timings.add(Phase::Solve, (beside - pattern_seconds).clamp(0.0, analysis_seconds));
+        let changes = match built {
+            Ok(changes) => changes,
+            Err(error) => {
+                // the store still holds the elements as they were
+                let store = &nodal.store;
+                let undo = pattern.update(
+                    cut.nodes_before as usize,
+                    &|e| store.element_nodes(e),
+                    touched,
+                    &nodes_of(mesh, touched),
+                );
+                pattern.locate(store, undo);
+                system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
+                return Err(error.into());
+            }
+        };
         if let Some(diameters) = &mut self.node_diameters {
             raise_node_diameters(mesh, touched.iter().map(|&e| e as usize), diameters);
         }
         // the nodes whose mass changes: those of the touched elements,
         // before and after
+        let store = &nodal.store;
         let mut changed_nodes = cut.old_nodes.clone();
         changed_nodes.extend(store.nodes_of(touched));
         changed_nodes.sort_unstable();
@@ -196,17 +238,12 @@ impl Simulation {
         origins.extend(&mut state.displacement);
         origins.extend(&mut state.velocity);
         origins.extend(&mut state.previous_velocity);
-        let n = mesh.nodes.len();
-        // the pattern's update (mostly moving its arrays, on one thread) and
-        // the masses, momenta and rotations (which do not read it) at once
-        let (store, corotation, pattern) = (&nodal.store, &mut nodal.corotation, &mut self.pattern);
-        let (masses, loads, p) = (&mut self.masses, &mut self.loads, &self.params);
-        let (pattern_seconds, ()) = rayon::join(
-            || {
-                let t = std::time::Instant::now();
-                pattern.update(n, store, touched, &cut.old_nodes);
-                t.elapsed().as_secs_f64()
-            },
+        // the pattern's entries located in the new store, beside the
+        // masses, momenta and rotations (which do not read it)
+        let corotation = &mut nodal.corotation;
+        let (masses, loads) = (&mut self.masses, &mut self.loads);
+        let (locate_seconds, ()) = rayon::join(
+            || timed(|| pattern.locate(store, unlocated)).1,
             || {
                 *masses = store.lumped_masses(n, p.material.density);
                 loads.clone_from(masses);
@@ -215,9 +252,7 @@ impl Simulation {
                 corotation.apply_changes(store, &changes, &state.position, p.corotated);
             },
         );
-        self.timings.add(Phase::Assembly, pattern_seconds);
-        let p = &self.params;
-        self.system.renew(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        self.timings.add(Phase::Assembly, locate_seconds);
         self.statics = None;
         self.surface = std::sync::OnceLock::new();
         self.refresh_body_loads();
@@ -298,6 +333,21 @@ impl Simulation {
             }
         })
     }
+}
+
+/// `f`'s result and the wall time it took (s).
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let t = std::time::Instant::now();
+    let out = f();
+    (out, t.elapsed().as_secs_f64())
+}
+
+/// The nodes of the `elements` of `mesh`, each once, in increasing order.
+fn nodes_of(mesh: &PolyMesh, elements: &[u32]) -> Vec<u32> {
+    let mut nodes: Vec<u32> = elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()).collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
 }
 
 /// The element a cut kept whole would have avoided `error`: an unhealthy

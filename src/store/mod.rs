@@ -522,6 +522,15 @@ impl ElementStore {
         Ok(moves)
     }
 
+    /// The nodes of element `e` (a mesh id) as the store holds them, in
+    /// its local order; none for an element it does not hold.
+    pub fn element_nodes(&self, e: u32) -> &[u32] {
+        match self.locate.get(e as usize) {
+            Some(&(b, i)) if b != u32::MAX => self.batches[b as usize].element_nodes(i as usize),
+            _ => &[],
+        }
+    }
+
     /// The nodes of the listed elements (mesh ids; unknown ones are
     /// skipped), as the store holds them: before an [`ElementStore::update`]
     /// these are the nodes the elements had before the change.

@@ -603,7 +603,8 @@ fn large_cut_measurements(label: &str, mesh: PolyMesh) -> Result<Vec<Measurement
         // where a cut's time goes, as the simulation books it: the split
         // and its bookkeeping (rollback, checks, node states, masses and
         // rotations), the touched elements' data, the pattern's update,
-        // and the solver's analysis of the new pattern
+        // and the solver's analysis of the new pattern (the last two run
+        // beside the elements' rebuild, and book the time they take past it)
         let (after, before) = (sim.timings(), phases_before);
         for (phase, seconds) in [
             ("split and bookkeeping", after.topology - before.topology),
