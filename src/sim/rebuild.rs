@@ -168,41 +168,54 @@ impl Simulation {
         // only the touched elements changed (the two sides of a cut carry
         // coincident nodes by design, which a whole-mesh check would flag)
         let list: Vec<usize> = touched.iter().map(|&e| e as usize).collect();
-        mesh.check_elements(&list, &ValidationOptions::default())?;
+        let check = |mesh: &PolyMesh| mesh.check_elements(&list, &ValidationOptions::default());
         // the negative part of a split element inherits from its positive part
         let parents: Vec<(u32, u32)> = cut.split.split_elements.iter().map(|&(kept, new)| (new, kept)).collect();
         let nodal = match &mut self.elements {
             Model::Nodal(nodal) => nodal,
-            Model::Dg(_) => return self.apply_cut_dg(cut, &parents),
+            Model::Dg(_) => {
+                check(mesh)?;
+                return self.apply_cut_dg(cut, &parents);
+            }
         };
         let origins = NodeOrigins::of_polygon_cut(report).map_err(|m| Error::Internal(format!("{m} after a cut")))?;
         if origins.len() != mesh.nodes.len() {
             let message = format!("{} node states for {} nodes after a cut", origins.len(), mesh.nodes.len());
             return Err(Error::Internal(message));
         }
-        // the touched elements' data (on every thread) beside the pattern's
-        // structure, which reads only the mesh, and the solver's analysis
-        // of it (mostly moving arrays, on one thread); both are undone if
-        // the store refuses an element
+        // the check of the touched elements and their data (on every thread)
+        // beside the pattern's structure, which reads only the mesh, and the
+        // solver's analysis of it (mostly moving arrays, on one thread);
+        // both are undone if the check or the store refuses an element
         let (store, pattern, system, p) = (&mut nodal.store, &mut self.pattern, &mut self.system, &self.params);
         let n = mesh.nodes.len();
         let elements_of = |e: u32| mesh.elements.get(e as usize).map_or(&[][..], |el| &el.nodes[..]);
         let t = std::time::Instant::now();
-        let ((built, store_seconds), ((unlocated, pattern_seconds), ((), analysis_seconds))) = rayon::join(
-            || timed(|| store.update(mesh, &p.material, &p.basis, touched, &parents)),
-            || {
-                let update = timed(|| pattern.update(n, &elements_of, touched, &cut.old_nodes));
-                // (an analysis that fails is run again, and reported, by the caller)
-                let analysis = timed(|| {
-                    system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
-                    let _analysed = system.ensure_analysed(pattern);
-                });
-                (update, analysis)
-            },
-        );
+        let ((built, check_seconds, store_seconds), ((unlocated, pattern_seconds), ((), analysis_seconds))) =
+            rayon::join(
+                || {
+                    let (checked, check_seconds) = timed(|| check(mesh));
+                    let (built, store_seconds) = match checked {
+                        Ok(()) => {
+                            timed(|| store.update(mesh, &p.material, &p.basis, touched, &parents).map_err(Error::from))
+                        }
+                        Err(error) => (Err(error.into()), 0.0),
+                    };
+                    (built, check_seconds, store_seconds)
+                },
+                || {
+                    let update = timed(|| pattern.update(n, &elements_of, touched, &cut.old_nodes));
+                    // (an analysis that fails is run again, and reported, by the caller)
+                    let analysis = timed(|| {
+                        system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
+                        let _analysed = system.ensure_analysed(pattern);
+                    });
+                    (update, analysis)
+                },
+            );
         // (the branches overlap: the rebuild books its time, the pattern and
-        // the analysis the time they took past it)
-        let beside = (t.elapsed().as_secs_f64() - store_seconds).max(0.0);
+        // the analysis the time they took past it; the check is the cut's)
+        let beside = (t.elapsed().as_secs_f64() - check_seconds - store_seconds).max(0.0);
         self.timings.add(Phase::Basis, store_seconds);
         self.timings.add(Phase::Assembly, pattern_seconds.min(beside));
         self.timings.add(Phase::Solve, (beside - pattern_seconds).clamp(0.0, analysis_seconds));
@@ -219,7 +232,7 @@ impl Simulation {
                 );
                 pattern.locate(store, undo);
                 system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
-                return Err(error.into());
+                return Err(error);
             }
         };
         if let Some(diameters) = &mut self.node_diameters {
