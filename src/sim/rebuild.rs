@@ -223,13 +223,10 @@ impl Simulation {
             Ok(changes) => changes,
             Err(error) => {
                 // the store still holds the elements as they were
+                // (the columns to put back: those of the touched elements now)
                 let store = &nodal.store;
-                let undo = pattern.update(
-                    cut.nodes_before as usize,
-                    &|e| store.element_nodes(e),
-                    touched,
-                    &nodes_of(mesh, touched),
-                );
+                let now: Vec<u32> = touched.iter().flat_map(|&e| elements_of(e).iter().copied()).collect();
+                let undo = pattern.update(cut.nodes_before as usize, &|e| store.element_nodes(e), touched, &now);
                 pattern.locate(store, undo);
                 system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
                 return Err(error);
@@ -353,14 +350,6 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
     let t = std::time::Instant::now();
     let out = f();
     (out, t.elapsed().as_secs_f64())
-}
-
-/// The nodes of the `elements` of `mesh`, each once, in increasing order.
-fn nodes_of(mesh: &PolyMesh, elements: &[u32]) -> Vec<u32> {
-    let mut nodes: Vec<u32> = elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()).collect();
-    nodes.sort_unstable();
-    nodes.dedup();
-    nodes
 }
 
 /// The element a cut kept whole would have avoided `error`: an unhealthy

@@ -535,11 +535,7 @@ impl ElementStore {
     /// skipped), as the store holds them: before an [`ElementStore::update`]
     /// these are the nodes the elements had before the change.
     pub fn nodes_of(&self, elements: &[u32]) -> Vec<u32> {
-        elements
-            .iter()
-            .filter_map(|&e| self.locate.get(e as usize))
-            .flat_map(|&(b, i)| self.batches[b as usize].element_nodes(i as usize).iter().copied())
-            .collect()
+        elements.iter().flat_map(|&e| self.element_nodes(e).iter().copied()).collect()
     }
 
     /// The store of the listed elements only (`locate` covers the whole
