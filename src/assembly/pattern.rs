@@ -593,6 +593,13 @@ impl SparsePattern {
         self.column_incidences(j).iter().map(|inc| inc.id)
     }
 
+    /// Where the entries coupling block `j` hold it, in the pattern's fixed
+    /// order: `(group, entry, local)`, block `j` being the entry's
+    /// `local`-th (none for a block past the pattern).
+    pub fn held_at(&self, j: usize) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+        self.column_incidences(j).iter().map(|inc| (inc.batch as usize, inc.element as usize, inc.local as usize))
+    }
+
     /// The incidences of node `j` (none for a node past the pattern).
     fn column_incidences(&self, j: usize) -> &[Incidence] {
         match (self.offsets.get(j), self.offsets.get(j + 1)) {

@@ -193,6 +193,16 @@ impl NodeView {
     }
 }
 
+/// The lumped mass (kg) of every node of a nodal body, `m_v = Σ_e μ_v^e
+/// V_e ρ` (wicke2007 eq. 18), each summed over the elements `pattern`
+/// lists at `v`, in its order: a cut recomputes only the nodes whose
+/// elements changed (see [`Simulation::apply_cut`]), and every other node
+/// keeps its mass to the bit, however the store moved its elements.
+fn nodal_masses(store: &ElementStore, pattern: &SparsePattern, density: f64) -> Vec<f64> {
+    use rayon::prelude::*;
+    (0..pattern.num_blocks).into_par_iter().map(|v| store.lumped_mass(pattern.held_at(v), density)).collect()
+}
+
 /// The rest positions of the blocks: the mesh nodes, or the coefficients
 /// of the identity map.
 fn rest<'a>(mesh: &'a PolyMesh, elements: &'a Model) -> &'a [[f64; 3]] {
@@ -220,7 +230,7 @@ impl Simulation {
             (Model::Dg(Box::new(dg)), pattern, masses, loads)
         } else {
             let pattern = timings.time(Phase::Assembly, || SparsePattern::build(mesh.nodes.len(), &store));
-            let masses = store.lumped_masses(mesh.nodes.len(), density);
+            let masses = nodal_masses(&store, &pattern, density);
             let corotation = Corotation::new(&store);
             (Model::Nodal(NodalElements { store, corotation }), pattern, masses.clone(), masses)
         };

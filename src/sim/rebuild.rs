@@ -249,20 +249,25 @@ impl Simulation {
         origins.extend(&mut state.velocity);
         origins.extend(&mut state.previous_velocity);
         // the pattern's entries located in the new store, beside the
-        // masses, momenta and rotations (which do not read it)
+        // rotations (which do not read it)
         let corotation = &mut nodal.corotation;
         let (masses, loads) = (&mut self.masses, &mut self.loads);
         let (locate_seconds, ()) = rayon::join(
             || timed(|| pattern.locate(store, unlocated)).1,
             || {
-                *masses = store.lumped_masses(n, p.material.density);
-                loads.clone_from(masses);
                 state.refresh_positions(&mesh.nodes);
-                conserve_momentum(&changed_nodes, masses, &state.position, &mut state.velocity, before);
                 corotation.apply_changes(store, &changes, &state.position, p.corotated);
             },
         );
         self.timings.add(Phase::Assembly, locate_seconds);
+        // only the changed nodes' masses change ([`super::nodal_masses`]),
+        // read through the located pattern
+        masses.resize(n, 0.0);
+        for &v in &changed_nodes {
+            masses[v as usize] = store.lumped_mass(pattern.held_at(v as usize), p.material.density);
+        }
+        loads.clone_from(masses);
+        conserve_momentum(&changed_nodes, masses, &state.position, &mut state.velocity, before);
         self.statics = None;
         self.surface = std::sync::OnceLock::new();
         self.refresh_body_loads();

@@ -254,6 +254,12 @@ impl Batch {
         self.dg.append(&mut other.dg);
     }
 
+    /// The mass (kg) entry `i` gives its `a`-th node: `μ_a V ρ`.
+    #[inline]
+    fn mass_share(&self, i: usize, a: usize, density: f64) -> f64 {
+        self.mass_fraction[i * self.k + a] * self.volume[i] * density
+    }
+
     /// A batch of the same kind, `k`, material and quadrature with no entries.
     fn empty_like(&self) -> Batch {
         Batch {
@@ -650,17 +656,25 @@ impl ElementStore {
         soft
     }
 
-    /// Lumped nodal masses (kg): `m_i = Σ_e μ_i^e V_e ρ` (wicke2007 eq. 18).
+    /// Lumped nodal masses (kg): `m_i = Σ_e μ_i^e V_e ρ` (wicke2007 eq. 18),
+    /// summed in the store's order.
     pub fn lumped_masses(&self, num_nodes: usize, density: f64) -> Vec<f64> {
         let mut m = vec![0.0; num_nodes];
         for b in &self.batches {
             for i in 0..b.len() {
                 for a in 0..b.k {
-                    m[b.nodes[i * b.k + a] as usize] += b.mass_fraction[i * b.k + a] * b.volume[i] * density;
+                    m[b.nodes[i * b.k + a] as usize] += b.mass_share(i, a, density);
                 }
             }
         }
         m
+    }
+
+    /// The lumped mass (kg) of the node the entries `held` (`(batch, entry,
+    /// local)`, as [`crate::assembly::SparsePattern::held_at`] lists them)
+    /// share: `m = Σ_e μ^e V_e ρ`, summed in that order.
+    pub fn lumped_mass(&self, held: impl Iterator<Item = (usize, usize, usize)>, density: f64) -> f64 {
+        held.fold(0.0, |m, (b, i, a)| m + self.batches[b].mass_share(i, a, density))
     }
 
     /// Total rest volume (m^3).

@@ -299,3 +299,37 @@ fn a_cut_that_fails_half_way_leaves_the_simulation_as_it_was() {
         assert!((x - y).abs() <= 1e-12 * scale, "{x} vs {y}");
     }
 }
+
+/// A cut recomputes the masses of the nodes whose elements it changed
+/// (before or after) and leaves every other node's to the bit, while each
+/// stays the sum over its elements (the store's, summed in its own order:
+/// to rounding) and the total the body's.
+#[test]
+fn a_cut_recomputes_the_masses_of_the_nodes_it_changed_only() {
+    let mesh = box_tet([0.0; 3], [2.0, 1.0, 1.0], [12, 6, 6]).unwrap();
+    let params = SimulationParams { min_part: 0.0, ..Default::default() };
+    let density = params.material.density;
+    let mut sim = Simulation::new(mesh, params).unwrap();
+    let blade = |x: f64, tilt: f64| [[x, -0.1, 0.2], [x + tilt, 0.6, 0.2], [x + tilt, 0.6, 0.8], [x, -0.1, 0.8]];
+    for polygon in [blade(0.53, 0.1), blade(1.21, -0.05), blade(0.9, 0.3)] {
+        let before = sim.masses().to_vec();
+        let report = sim.cut_polygon(&polygon).unwrap().cut;
+        let mut changed = vec![false; sim.mesh().nodes.len()];
+        report.old_nodes.iter().for_each(|&v| changed[v as usize] = true);
+        for &e in &report.touched {
+            sim.mesh().elements[e as usize].nodes.iter().for_each(|&v| changed[v as usize] = true);
+        }
+        assert!(changed.iter().any(|&c| c) && !changed.iter().all(|&c| c));
+        let fresh = sim.store().lumped_masses(changed.len(), density);
+        assert_eq!(sim.masses().len(), fresh.len());
+        for (v, (&m, &f)) in sim.masses().iter().zip(&fresh).enumerate() {
+            assert!((m - f).abs() <= 1e-14 * f, "node {v}: mass {m} against {f} summed afresh");
+            if !changed[v] {
+                assert_eq!(m.to_bits(), before[v].to_bits(), "node {v} untouched by the cut");
+            }
+        }
+        let total: f64 = sim.masses().iter().sum();
+        let body = density * sim.store().total_volume();
+        assert!((total - body).abs() <= 1e-12 * body, "total mass {total} against {body}");
+    }
+}
