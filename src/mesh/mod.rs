@@ -32,10 +32,23 @@ use cleave_kernels::vec3::{add, scale, sub};
 /// Sets `nodes` to the sorted, distinct nodes of the faces `refs`, in its
 /// own storage (a cut refreshes thousands of node lists).
 fn collect_nodes(faces: &[Face], refs: &[FaceRef], nodes: &mut Vec<u32>) {
+    collect_loop_nodes(refs.iter().map(|r| &faces[r.face as usize].vertices[..]), nodes);
+}
+
+/// The sorted, distinct nodes of the vertex `loops` (the node list of an
+/// element with those faces).
+pub(crate) fn loop_nodes<'a>(loops: impl Iterator<Item = &'a [u32]> + Clone) -> Vec<u32> {
+    let mut nodes = Vec::new();
+    collect_loop_nodes(loops, &mut nodes);
+    nodes
+}
+
+/// [`loop_nodes`] into `nodes`.
+fn collect_loop_nodes<'a>(loops: impl Iterator<Item = &'a [u32]> + Clone, nodes: &mut Vec<u32>) {
     nodes.clear();
-    nodes.reserve(refs.iter().map(|r| faces[r.face as usize].vertices.len()).sum());
-    for r in refs {
-        nodes.extend_from_slice(&faces[r.face as usize].vertices);
+    nodes.reserve(loops.clone().map(<[u32]>::len).sum());
+    for lp in loops {
+        nodes.extend_from_slice(lp);
     }
     nodes.sort_unstable();
     nodes.dedup();

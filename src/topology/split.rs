@@ -775,55 +775,88 @@ pub(crate) fn split(
         mesh.refresh_element_nodes(e);
         report.repaired_elements.push(e as u32);
     }
-    // 3. split the elements
-    let mut outward = Loops::default();
-    let mut positions: Vec<[f64; 3]> = Vec::new();
-    for &e in &crossed {
-        // (each part takes at most every face and a cap piece or two)
-        let room = mesh.elements[e].faces.len() + 2;
-        let (mut pos_faces, mut neg_faces) = (Vec::with_capacity(room), Vec::with_capacity(room));
-        for r in &mesh.elements[e].faces {
-            if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
-                pos_faces.push(FaceRef { face: fp, outward: r.outward });
-                neg_faces.push(FaceRef { face: fneg, outward: r.outward });
-                continue;
-            }
-            let v = &mesh.faces[r.face as usize].vertices;
-            if v.iter().any(|&x| side_of(x) > 0) {
-                pos_faces.push(*r);
-            } else if v.iter().any(|&x| side_of(x) < 0) {
-                neg_faces.push(*r);
-            } else {
-                return Err(SplitError::NonConvexElement { element: e, face: r.face as usize });
-            }
+    // 3. split the elements: each one's parts (their faces, caps and
+    // nodes) found in parallel, since each reads only the faces above and
+    // the nodes, then written in order (the first failure in order is the
+    // one reported)
+    let (faces, nodes) = (&mesh.faces, &mesh.nodes);
+    let elements = &mesh.elements;
+    let parts: Vec<Result<ElementParts, SplitError>> = crossed
+        .par_iter()
+        .map_init(
+            || (Loops::default(), Vec::new()),
+            |(outward, positions), &e| {
+                // (each part takes at most every face and a cap piece or two)
+                let room = elements[e].faces.len() + 2;
+                let (mut pos_faces, mut neg_faces) = (Vec::with_capacity(room), Vec::with_capacity(room));
+                for r in &elements[e].faces {
+                    if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
+                        pos_faces.push(FaceRef { face: fp, outward: r.outward });
+                        neg_faces.push(FaceRef { face: fneg, outward: r.outward });
+                        continue;
+                    }
+                    let v = &faces[r.face as usize].vertices;
+                    if v.iter().any(|&x| side_of(x) > 0) {
+                        pos_faces.push(*r);
+                    } else if v.iter().any(|&x| side_of(x) < 0) {
+                        neg_faces.push(*r);
+                    } else {
+                        return Err(SplitError::NonConvexElement { element: e, face: r.face as usize });
+                    }
+                }
+                outward.clear();
+                for r in &pos_faces {
+                    outward.push(faces[r.face as usize].vertices.iter().map(|&v| (v, nodes[v as usize])));
+                    if !r.outward {
+                        outward.reverse_last();
+                    }
+                }
+                let cap_points = cap_loop(outward).ok_or(SplitError::DegenerateCap { element: e })?;
+                positions.clear();
+                positions.extend(cap_points.iter().map(|&p| nodes[p as usize]));
+                // the cap pieces run counter-clockwise about +n: out of the negative part
+                let caps: Vec<Face> = cap_pieces(positions, plane)
+                    .into_iter()
+                    .map(|piece| {
+                        let vertices: Vec<u32> = piece.iter().map(|&i| cap_points[i]).collect();
+                        Face { triangles: crate::mesh::triangulate_loop(nodes, &vertices), vertices }
+                    })
+                    .collect();
+                let loops = |refs: &[FaceRef]| {
+                    let faces = refs.iter().map(|r| &faces[r.face as usize].vertices[..]);
+                    crate::mesh::loop_nodes(faces.chain(caps.iter().map(|c| &c.vertices[..])))
+                };
+                let (pos_nodes, neg_nodes) = (loops(&pos_faces), loops(&neg_faces));
+                Ok(ElementParts { pos_faces, neg_faces, caps, pos_nodes, neg_nodes })
+            },
+        )
+        .collect();
+    for (&e, parts) in crossed.iter().zip(parts) {
+        let ElementParts { mut pos_faces, mut neg_faces, caps, pos_nodes, neg_nodes } = parts?;
+        for cap in caps {
+            let id = mesh.faces.len() as u32;
+            mesh.faces.push(cap);
+            pos_faces.push(FaceRef { face: id, outward: false });
+            neg_faces.push(FaceRef { face: id, outward: true });
+            report.caps.push(id);
         }
-        outward.clear();
-        for r in &pos_faces {
-            outward.push(mesh.faces[r.face as usize].vertices.iter().map(|&v| (v, mesh.nodes[v as usize])));
-            if !r.outward {
-                outward.reverse_last();
-            }
-        }
-        let cap_points = cap_loop(&outward).ok_or(SplitError::DegenerateCap { element: e })?;
-        positions.clear();
-        positions.extend(cap_points.iter().map(|&p| mesh.nodes[p as usize]));
-        // the cap pieces run counter-clockwise about +n: out of the negative part
-        for piece in cap_pieces(&positions, plane) {
-            let cap = mesh.faces.len() as u32;
-            mesh.faces.push(Face { vertices: piece.iter().map(|&i| cap_points[i]).collect(), triangles: vec![] });
-            mesh.triangulate_face(cap as usize);
-            pos_faces.push(FaceRef { face: cap, outward: false });
-            neg_faces.push(FaceRef { face: cap, outward: true });
-            report.caps.push(cap);
-        }
-        mesh.elements[e].faces = pos_faces;
-        mesh.refresh_element_nodes(e);
+        mesh.elements[e] = crate::mesh::Element { faces: pos_faces, nodes: pos_nodes };
         let ne = mesh.elements.len();
-        mesh.elements.push(crate::mesh::Element { faces: neg_faces, nodes: Vec::new() });
-        mesh.refresh_element_nodes(ne);
+        mesh.elements.push(crate::mesh::Element { faces: neg_faces, nodes: neg_nodes });
         report.split_elements.push((e as u32, ne as u32));
     }
     Ok(report)
+}
+
+/// The two parts of a crossed element, before they are written into the
+/// mesh: their faces (without the caps), the cap pieces between them, and
+/// their sorted nodes (the caps' included).
+struct ElementParts {
+    pos_faces: Vec<FaceRef>,
+    neg_faces: Vec<FaceRef>,
+    caps: Vec<Face>,
+    pos_nodes: Vec<u32>,
+    neg_nodes: Vec<u32>,
 }
 
 /// Relative distance (of the mesh's bounding box diagonal) within which a
