@@ -54,6 +54,8 @@ use state::NodeState;
 use statics::StaticSystem;
 use step::StepSystem;
 
+use rayon::prelude::*;
+
 use crate::assembly::SparsePattern;
 use crate::dg::DgElements;
 use crate::mesh::PolyMesh;
@@ -199,7 +201,6 @@ impl NodeView {
 /// elements changed (see [`Simulation::apply_cut`]), and every other node
 /// keeps its mass to the bit, however the store moved its elements.
 fn nodal_masses(store: &ElementStore, pattern: &SparsePattern, density: f64) -> Vec<f64> {
-    use rayon::prelude::*;
     (0..pattern.num_blocks).into_par_iter().map(|v| store.lumped_mass(pattern.held_at(v), density)).collect()
 }
 
