@@ -171,7 +171,7 @@ fn seed_meshes() -> Vec<(Vec<[f64; 3]>, Vec<Cell>)> {
     let tet = |n: &[u32]| Cell::Tet([n[0], n[1], n[2], n[3]]);
     let cube_cells = cube.elements.iter().map(|e| tet(&e.nodes)).collect();
     let bunny = read_mesh(&root().join("assets/bunny_5k.mesh")).unwrap();
-    let tets: Vec<Vec<u32>> = bunny.elements.iter().take(6).map(|e| e.nodes.clone()).collect();
+    let tets: Vec<Vec<u32>> = bunny.elements.iter().take(6).map(|e| e.nodes.to_vec()).collect();
     let mut used: Vec<u32> = tets.iter().flatten().copied().collect();
     used.sort_unstable();
     used.dedup();

@@ -26,41 +26,62 @@ pub use triangulate::triangulate_loop;
 pub use validate::{MeshError, ValidationOptions};
 
 use rayon::prelude::*;
+use smallvec::SmallVec;
 
 use cleave_kernels::vec3::{add, scale, sub};
 
 /// Sets `nodes` to the sorted, distinct nodes of the faces `refs`, in its
 /// own storage (a cut refreshes thousands of node lists).
-fn collect_nodes(faces: &[Face], refs: &[FaceRef], nodes: &mut Vec<u32>) {
+fn collect_nodes(faces: &[Face], refs: &[FaceRef], nodes: &mut ElementNodes) {
     collect_loop_nodes(refs.iter().map(|r| &faces[r.face as usize].vertices[..]), nodes);
 }
 
 /// The sorted, distinct nodes of the vertex `loops` (the node list of an
 /// element with those faces).
-pub(crate) fn loop_nodes<'a>(loops: impl Iterator<Item = &'a [u32]> + Clone) -> Vec<u32> {
-    let mut nodes = Vec::new();
+pub(crate) fn loop_nodes<'a>(loops: impl Iterator<Item = &'a [u32]>) -> ElementNodes {
+    let mut nodes = ElementNodes::new();
     collect_loop_nodes(loops, &mut nodes);
     nodes
 }
 
-/// [`loop_nodes`] into `nodes`.
-fn collect_loop_nodes<'a>(loops: impl Iterator<Item = &'a [u32]> + Clone, nodes: &mut Vec<u32>) {
-    nodes.clear();
-    nodes.reserve(loops.clone().map(<[u32]>::len).sum());
+/// [`loop_nodes`] into `nodes`, gathered on the stack first: every node
+/// appears in several loops (a hexahedron's 8 in 24 places), and only the
+/// distinct ones may take `nodes`' inline room.
+fn collect_loop_nodes<'a>(loops: impl Iterator<Item = &'a [u32]>, nodes: &mut ElementNodes) {
+    let mut all: SmallVec<[u32; 64]> = SmallVec::new();
     for lp in loops {
-        nodes.extend_from_slice(lp);
+        all.extend_from_slice(lp);
     }
-    nodes.sort_unstable();
-    nodes.dedup();
+    all.sort_unstable();
+    all.dedup();
+    nodes.clear();
+    nodes.extend_from_slice(&all);
 }
+
+/// A face's vertex loop, inline up to six vertices: every face of a
+/// tetrahedral or hexahedral mesh and most faces a cut makes need no heap
+/// storage of their own (a mesh of a million elements holds two million
+/// faces, and a cut copies and rewrites thousands).
+pub type FaceLoop = SmallVec<[u32; 6]>;
+
+/// A face's triangles, inline up to four (a loop of six vertices).
+pub type FaceTriangles = SmallVec<[[u32; 3]; 4]>;
+
+/// An element's face references, inline up to eight (a tetrahedron's four,
+/// a hexahedron's six, most cut pieces').
+pub type ElementFaces = SmallVec<[FaceRef; 8]>;
+
+/// An element's nodes, inline up to twelve (a tetrahedron's four, a
+/// hexahedron's eight, most cut pieces').
+pub type ElementNodes = SmallVec<[u32; 12]>;
 
 /// A global face: a vertex loop and its triangulation.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Face {
     /// Node ids around the face, counter-clockwise about the face normal.
-    pub vertices: Vec<u32>,
+    pub vertices: FaceLoop,
     /// Triangles of the loop in node ids, each oriented like the loop.
-    pub triangles: Vec<[u32; 3]>,
+    pub triangles: FaceTriangles,
 }
 
 impl Face {
@@ -106,9 +127,9 @@ pub struct FaceRef {
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Element {
     /// The faces bounding this element.
-    pub faces: Vec<FaceRef>,
+    pub faces: ElementFaces,
     /// The element's nodes in increasing id order (the element-local order).
-    pub nodes: Vec<u32>,
+    pub nodes: ElementNodes,
 }
 
 /// A volume cell as read from a file, before faces are shared.
@@ -125,15 +146,21 @@ pub enum Cell {
 impl Cell {
     /// The face loops of the cell in its own numbering.
     pub fn face_loops(&self) -> Vec<Vec<u32>> {
+        self.loops().iter().map(|lp| lp.to_vec()).collect()
+    }
+
+    /// [`Cell::face_loops`] inline (a tetrahedron's or a hexahedron's
+    /// need no heap storage: a mesh reads a million of them).
+    fn loops(&self) -> SmallVec<[FaceLoop; 6]> {
         match self {
             Cell::Tet(t) => {
-                vec![vec![t[0], t[2], t[1]], vec![t[0], t[1], t[3]], vec![t[1], t[2], t[3]], vec![t[0], t[3], t[2]]]
+                [[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]].iter().map(|f| f.iter().map(|&i| t[i]).collect()).collect()
             }
             Cell::Hex(h) => [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
                 .iter()
                 .map(|f| f.iter().map(|&i| h[i]).collect())
                 .collect(),
-            Cell::Polyhedron(faces) => faces.clone(),
+            Cell::Polyhedron(faces) => faces.iter().map(|lp| FaceLoop::from_slice(lp)).collect(),
         }
     }
 }
@@ -150,8 +177,8 @@ pub struct PolyMesh {
 }
 
 /// The key under which a face loop is shared: its sorted vertex set.
-pub(crate) fn face_key(vertices: &[u32]) -> Vec<u32> {
-    let mut k = vertices.to_vec();
+pub(crate) fn face_key(vertices: &[u32]) -> FaceLoop {
+    let mut k = FaceLoop::from_slice(vertices);
     k.sort_unstable();
     k
 }
@@ -197,11 +224,11 @@ impl PolyMesh {
             return Err(MeshError::NonFiniteNode { node, position: nodes[node] });
         }
         let mut mesh = PolyMesh { nodes, faces: Vec::new(), elements: Vec::with_capacity(cells.len()) };
-        let mut by_key: rustc_hash::FxHashMap<Vec<u32>, u32> = Default::default();
+        let mut by_key: rustc_hash::FxHashMap<FaceLoop, u32> = Default::default();
         let mut users: Vec<u8> = Vec::new();
         for (e, cell) in cells.iter().enumerate() {
-            let loops = cell.face_loops();
-            let mut refs = Vec::with_capacity(loops.len());
+            let loops = cell.loops();
+            let mut refs = ElementFaces::with_capacity(loops.len());
             for lp in loops {
                 if let Some(&bad) = lp.iter().find(|&&v| v as usize >= n) {
                     return Err(MeshError::NodeIndexOutOfRange { element: e, index: bad as usize, nodes: n });
@@ -213,12 +240,12 @@ impl PolyMesh {
                     d.len()
                 };
                 if distinct < 3 || distinct != lp.len() {
-                    return Err(MeshError::DegenerateFace { element: e, vertices: lp });
+                    return Err(MeshError::DegenerateFace { element: e, vertices: lp.to_vec() });
                 }
                 let next = mesh.faces.len() as u32;
                 let f = *by_key.entry(key).or_insert(next);
                 if f == next {
-                    mesh.faces.push(Face { vertices: lp.clone(), triangles: Vec::new() });
+                    mesh.faces.push(Face { vertices: lp.clone(), triangles: FaceTriangles::new() });
                     users.push(0);
                 }
                 users[f as usize] += 1;
@@ -229,7 +256,7 @@ impl PolyMesh {
                 let same = same_direction(&mesh.faces[f as usize].vertices, &lp);
                 refs.push(FaceRef { face: f, outward: same });
             }
-            mesh.elements.push(Element { faces: refs, nodes: Vec::new() });
+            mesh.elements.push(Element { faces: refs, nodes: ElementNodes::new() });
         }
         let faces = &mesh.faces;
         mesh.elements.par_iter_mut().for_each(|el| collect_nodes(faces, &el.faces, &mut el.nodes));

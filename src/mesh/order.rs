@@ -122,12 +122,12 @@ mod tests {
             let renumbered = &mesh.elements[moved.element[old] as usize];
             let mut nodes: Vec<u32> = element.nodes.iter().map(|&v| moved.node[v as usize]).collect();
             nodes.sort_unstable();
-            assert_eq!(renumbered.nodes, nodes, "element {old}");
+            assert_eq!(renumbered.nodes[..], nodes[..], "element {old}");
             assert_eq!(renumbered.faces, element.faces, "element {old}");
         }
         for (face, old) in mesh.faces.iter().zip(&shuffled.faces) {
             let loop_: Vec<u32> = old.vertices.iter().map(|&v| moved.node[v as usize]).collect();
-            assert_eq!(face.vertices, loop_);
+            assert_eq!(face.vertices[..], loop_[..]);
         }
         assert!(mesh.elements.windows(2).all(|w| w[0].nodes[0] <= w[1].nodes[0]));
         let (before, after) = (spread(&shuffled), spread(&mesh));

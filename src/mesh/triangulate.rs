@@ -11,15 +11,16 @@ use cleave_kernels::vec3::{cross, dot, norm, sub};
 use smallvec::SmallVec;
 
 use super::geometry::face_geometry;
+use super::FaceTriangles;
 
 /// Loop lengths triangulated without a heap allocation for the work lists.
 const LOCAL: usize = 24;
 
 /// Triangles (in node ids, oriented like the loop) covering the loop.
-pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> Vec<[u32; 3]> {
+pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceTriangles {
     let n = vertices.len();
     if n == 3 {
-        return vec![[vertices[0], vertices[1], vertices[2]]];
+        return smallvec::smallvec![[vertices[0], vertices[1], vertices[2]]];
     }
     let normal = face_geometry(nodes, vertices).normal;
     // 2D coordinates in the face plane.
@@ -40,7 +41,7 @@ pub fn triangulate_loop(nodes: &[[f64; 3]], vertices: &[u32]) -> Vec<[u32; 3]> {
         })
         .collect();
     let mut ring: SmallVec<[usize; LOCAL]> = (0..n).collect();
-    let mut out = Vec::with_capacity(n - 2);
+    let mut out = FaceTriangles::with_capacity(n - 2);
     while ring.len() > 3 {
         let m = ring.len();
         let mut best: Option<(usize, f64)> = None;

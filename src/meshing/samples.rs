@@ -21,7 +21,7 @@ pub fn replicate(mesh: &PolyMesh, n: usize) -> Result<PolyMesh, MeshError> {
         .map(|r| {
             let v = &mesh.faces[r.face as usize].vertices;
             if r.outward {
-                v.clone()
+                v.to_vec()
             } else {
                 v.iter().rev().copied().collect()
             }

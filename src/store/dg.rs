@@ -213,7 +213,7 @@ fn frame_of(mesh: &PolyMesh, e: usize) -> [f64; 4] {
 fn faces_of(mesh: &PolyMesh, e: usize, cache: Option<&DgBasis>, todo: &mut Vec<usize>) -> Vec<FaceMoments> {
     let mut out = Vec::with_capacity(mesh.elements[e].faces.len());
     for r in &mesh.elements[e].faces {
-        let mut vertices = mesh.faces[r.face as usize].vertices.clone();
+        let mut vertices = mesh.faces[r.face as usize].vertices.to_vec();
         if !r.outward {
             vertices.reverse();
         }
@@ -381,7 +381,7 @@ pub(super) fn build_batch(
         stiffness,
         lame: (lambda, mu),
         stress_grads,
-        triangles: Vec::new(),
+        triangles: Default::default(),
         points: Vec::new(),
         weights: Vec::new(),
         points_per_element: 0,

@@ -42,7 +42,7 @@ pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u3
         stiffness: Vec::new(),
         lame: material.lame(),
         stress_grads,
-        triangles: Vec::new(),
+        triangles: Default::default(),
         points: Vec::new(),
         weights: Vec::new(),
         points_per_element: 1,

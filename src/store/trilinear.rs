@@ -35,13 +35,13 @@ pub(super) fn hex_corners(mesh: &PolyMesh, e: usize) -> Option<[usize; 8]> {
     if el.nodes.len() != 8 || el.faces.len() != 6 {
         return None;
     }
-    let loops: Vec<Vec<u32>> = el.faces.iter().map(|r| mesh.faces[r.face as usize].vertices.clone()).collect();
+    let loops: Vec<&[u32]> = el.faces.iter().map(|r| &mesh.faces[r.face as usize].vertices[..]).collect();
     if loops.iter().any(|l| l.len() != 4) {
         return None;
     }
     // bottom: the first face, ordered so its normal points inward
     let r = &el.faces[0];
-    let mut bottom = loops[0].clone();
+    let mut bottom = loops[0].to_vec();
     if r.outward {
         bottom.reverse();
     }

@@ -23,7 +23,7 @@ use super::cut::{cut_region, element_sides, separate, CutReport};
 use super::split::{on_plane_band, plane_basis, split, NewNode, SplitError, SplitOptions, ON_PLANE};
 use super::CutScope;
 use crate::mesh::Plane;
-use crate::mesh::{face_geometry, Face, FaceRef, PolyMesh};
+use crate::mesh::{face_geometry, Face, FaceLoop, FaceRef, PolyMesh};
 
 /// What a polygon cut changed, beyond a plane cut's report.
 #[derive(Clone, Debug, PartialEq)]
@@ -304,7 +304,7 @@ pub fn cut_by_polygon_keeping(
     let mut edge_node: HashMap<(u32, u32), u32> = HashMap::default();
     let mut touched_faces: Vec<u32> = Vec::new();
     // (the face's loop and its vertices' sides, reused from face to face)
-    let (mut lp, mut s): (Vec<u32>, Vec<i8>) = (Vec::new(), Vec::new());
+    let (mut lp, mut s): (FaceLoop, Vec<i8>) = (FaceLoop::new(), Vec::new());
     for i in 0..n_pts {
         let (a2, b2) = (outline[i], outline[(i + 1) % n_pts]);
         let mut k = 0;
@@ -343,7 +343,7 @@ pub fn cut_by_polygon_keeping(
             if guarded(f as u32) || crossed_guarded {
                 continue;
             }
-            let (mut inside, mut outside) = (Vec::new(), Vec::new());
+            let (mut inside, mut outside) = (FaceLoop::new(), FaceLoop::new());
             for j in 0..lp.len() {
                 let (va, vb) = (lp[j], lp[(j + 1) % lp.len()]);
                 let (sa, sb) = (s[j], s[(j + 1) % lp.len()]);
@@ -385,13 +385,13 @@ pub fn cut_by_polygon_keeping(
                     node_faces.entry(c).or_default().push(f as u32);
                 }
             }
-            mesh.faces[f] = Face { vertices: inside, triangles: Vec::new() };
+            mesh.faces[f] = Face { vertices: inside, triangles: Default::default() };
             mesh.triangulate_face(f);
             let g = mesh.faces.len() as u32;
             for &v in &outside {
                 node_faces.entry(v).or_default().push(g);
             }
-            mesh.faces.push(Face { vertices: outside, triangles: Vec::new() });
+            mesh.faces.push(Face { vertices: outside, triangles: Default::default() });
             mesh.triangulate_face(g as usize);
             let face_users = users.get(&(f as u32)).copied().unwrap_or_default();
             for &e in face_users.as_slice() {
@@ -443,19 +443,19 @@ pub fn cut_by_polygon_keeping(
             .filter(|(_, (room, _))| *room >= opts.min_spacing)
             .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
         if let Some((f, (_, position))) = host {
-            let lp = mesh.faces[f as usize].vertices.clone();
+            let lp = mesh.faces[f as usize].vertices.to_vec();
             let c = mesh.nodes.len() as u32;
             mesh.nodes.push(position);
             let fan: Vec<u32> = (0..lp.len())
                 .map(|i| {
-                    let tri = vec![c, lp[i], lp[(i + 1) % lp.len()]];
+                    let tri: FaceLoop = smallvec::smallvec![c, lp[i], lp[(i + 1) % lp.len()]];
                     if i == 0 {
-                        mesh.faces[f as usize] = Face { vertices: tri, triangles: Vec::new() };
+                        mesh.faces[f as usize] = Face { vertices: tri, triangles: Default::default() };
                         mesh.triangulate_face(f as usize);
                         f
                     } else {
                         let g = mesh.faces.len() as u32;
-                        mesh.faces.push(Face { vertices: tri, triangles: Vec::new() });
+                        mesh.faces.push(Face { vertices: tri, triangles: Default::default() });
                         mesh.triangulate_face(g as usize);
                         g
                     }

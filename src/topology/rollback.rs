@@ -132,11 +132,11 @@ impl Rollback {
         mesh.elements.truncate(self.elements);
         for (i, &f) in self.faces_saved.iter().enumerate() {
             mesh.faces[f as usize] =
-                Face { vertices: self.face_vertices.get(i).to_vec(), triangles: self.face_triangles.get(i).to_vec() };
+                Face { vertices: self.face_vertices.get(i).into(), triangles: self.face_triangles.get(i).into() };
         }
         for (i, &e) in self.elements_saved.iter().enumerate() {
             mesh.elements[e as usize] =
-                Element { faces: self.element_faces.get(i).to_vec(), nodes: self.element_nodes.get(i).to_vec() };
+                Element { faces: self.element_faces.get(i).into(), nodes: self.element_nodes.get(i).into() };
         }
     }
 }

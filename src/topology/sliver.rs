@@ -33,7 +33,7 @@ use faer::{Mat, Side};
 
 use super::rollback::Rollback;
 use crate::mesh::Plane;
-use crate::mesh::{face_geometry, Face, FaceRef, MeshError, PolyMesh, ValidationOptions};
+use crate::mesh::{face_geometry, Face, FaceLoop, FaceRef, MeshError, PolyMesh, ValidationOptions};
 
 /// What [`merge_slivers`] did.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -242,13 +242,13 @@ fn merge_quadrilateral(
         };
         let up = *upper.iter().find(|f| holds(mesh, f)).ok_or("no upper face holds a side")?;
         let down = *lower.iter().find(|f| holds(mesh, f)).ok_or("no lower face holds a side")?;
-        let mut tri = vec![u, w, x];
+        let mut tri: FaceLoop = smallvec::smallvec![u, w, x];
         let n = face_geometry(&mesh.nodes, &tri).normal;
         if dot(n, normal) < 0.0 {
             tri.reverse();
         }
         let cell = mesh.faces.len() as u32;
-        mesh.faces.push(Face { vertices: tri, triangles: Vec::new() });
+        mesh.faces.push(Face { vertices: tri, triangles: Default::default() });
         mesh.triangulate_face(cell as usize);
         // the cell's loop runs about +normal: outward for the element below
         for (old, outward) in [(up, false), (down, true)] {

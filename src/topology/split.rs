@@ -39,7 +39,10 @@ use smallvec::SmallVec;
 use thiserror::Error;
 
 use super::CutScope;
-use crate::mesh::{diameter, diameter_of, fold_depth, loop_geometry, quality, Face, FaceRef, Loops, Plane, PolyMesh};
+use crate::mesh::{
+    diameter, diameter_of, fold_depth, loop_geometry, quality, ElementFaces, ElementNodes, Face, FaceLoop, FaceRef,
+    Loops, Plane, PolyMesh,
+};
 
 /// Tolerances of a split.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -692,7 +695,7 @@ pub(crate) fn split(
             // (the face's loop is replaced by its positive part below)
             let v = std::mem::take(&mut mesh.faces[r.face as usize].vertices);
             // (a convex face's parts gain at most the two crossings)
-            let (mut pos, mut neg) = (Vec::with_capacity(v.len() + 2), Vec::with_capacity(v.len() + 2));
+            let (mut pos, mut neg) = (FaceLoop::with_capacity(v.len() + 2), FaceLoop::with_capacity(v.len() + 2));
             for i in 0..v.len() {
                 let (a, b) = (v[i], v[(i + 1) % v.len()]);
                 let sa = side[a as usize];
@@ -709,9 +712,9 @@ pub(crate) fn split(
                 }
             }
             let f_pos = r.face;
-            mesh.faces[f_pos as usize] = Face { vertices: pos, triangles: Vec::new() };
+            mesh.faces[f_pos as usize] = Face { vertices: pos, triangles: Default::default() };
             let f_neg = mesh.faces.len() as u32;
-            mesh.faces.push(Face { vertices: neg, triangles: Vec::new() });
+            mesh.faces.push(Face { vertices: neg, triangles: Default::default() });
             mesh.triangulate_face(f_pos as usize);
             mesh.triangulate_face(f_neg as usize);
             face_parts.insert(r.face, (f_pos, f_neg));
@@ -761,7 +764,7 @@ pub(crate) fn split(
         if !touches {
             continue;
         }
-        let mut new_refs = Vec::with_capacity(refs.len() + 2);
+        let mut new_refs = ElementFaces::with_capacity(refs.len() + 2);
         for r in refs {
             match face_parts.get(&r.face) {
                 Some(&(fp, fneg)) => {
@@ -788,7 +791,8 @@ pub(crate) fn split(
             |(outward, positions), &e| {
                 // (each part takes at most every face and a cap piece or two)
                 let room = elements[e].faces.len() + 2;
-                let (mut pos_faces, mut neg_faces) = (Vec::with_capacity(room), Vec::with_capacity(room));
+                let (mut pos_faces, mut neg_faces) =
+                    (ElementFaces::with_capacity(room), ElementFaces::with_capacity(room));
                 for r in &elements[e].faces {
                     if let Some(&(fp, fneg)) = face_parts.get(&r.face) {
                         pos_faces.push(FaceRef { face: fp, outward: r.outward });
@@ -818,7 +822,7 @@ pub(crate) fn split(
                 let caps: Vec<Face> = cap_pieces(positions, plane)
                     .into_iter()
                     .map(|piece| {
-                        let vertices: Vec<u32> = piece.iter().map(|&i| cap_points[i]).collect();
+                        let vertices: FaceLoop = piece.iter().map(|&i| cap_points[i]).collect();
                         Face { triangles: crate::mesh::triangulate_loop(nodes, &vertices), vertices }
                     })
                     .collect();
@@ -852,11 +856,11 @@ pub(crate) fn split(
 /// mesh: their faces (without the caps), the cap pieces between them, and
 /// their sorted nodes (the caps' included).
 struct ElementParts {
-    pos_faces: Vec<FaceRef>,
-    neg_faces: Vec<FaceRef>,
+    pos_faces: ElementFaces,
+    neg_faces: ElementFaces,
     caps: Vec<Face>,
-    pos_nodes: Vec<u32>,
-    neg_nodes: Vec<u32>,
+    pos_nodes: ElementNodes,
+    neg_nodes: ElementNodes,
 }
 
 /// Relative distance (of the mesh's bounding box diagonal) within which a

@@ -58,7 +58,7 @@ fn cut_and_check(mut mesh: PolyMesh, plane: Plane) -> PolyMesh {
     for e in 0..before.elements.len() {
         if report.touched.binary_search(&(e as u32)).is_err() {
             let loops = |m: &PolyMesh| -> Vec<Vec<u32>> {
-                m.elements[e].faces.iter().map(|r| m.faces[r.face as usize].vertices.clone()).collect()
+                m.elements[e].faces.iter().map(|r| m.faces[r.face as usize].vertices.to_vec()).collect()
             };
             assert_eq!(loops(&before), loops(&mesh), "untouched element {e} changed");
         }
@@ -329,7 +329,7 @@ fn polygon_cut_and_check(mesh: &mut PolyMesh, polygon: &[[f64; 3]]) -> cleave::t
     for e in 0..before.elements.len() {
         if report.cut.touched.binary_search(&(e as u32)).is_err() {
             let loops = |m: &PolyMesh| -> Vec<Vec<u32>> {
-                m.elements[e].faces.iter().map(|r| m.faces[r.face as usize].vertices.clone()).collect()
+                m.elements[e].faces.iter().map(|r| m.faces[r.face as usize].vertices.to_vec()).collect()
             };
             assert_eq!(loops(&before), loops(mesh), "untouched element {e} changed");
         }
@@ -470,4 +470,37 @@ fn a_cut_next_to_a_face_follows_the_face_instead_of_leaving_a_sliver() {
     assert_eq!(report.split.split_elements.len(), 1);
     let worst = (0..sliced.elements.len()).map(|e| sliced.element_quality(e)).fold(f64::INFINITY, f64::min);
     assert!(worst < SplitOptions::default().min_quality, "quality {worst}");
+}
+
+/// Faces and elements keep their lists inline (no heap storage per face
+/// or per element, which a large mesh's setup and every cut paid in
+/// allocations): all of a tetrahedral or a hexahedral mesh's, and nearly
+/// all of the pieces blade cuts make across the bunny.
+#[test]
+fn meshes_and_cut_pieces_keep_their_lists_inline() {
+    let spilled = |mesh: &PolyMesh| {
+        let faces = mesh.faces.iter().filter(|f| f.vertices.spilled() || f.triangles.spilled()).count();
+        let elements = mesh.elements.iter().filter(|e| e.faces.spilled() || e.nodes.spilled()).count();
+        (faces, elements)
+    };
+    for mesh in [box_tet([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap(), box_hex([0.0; 3], [1.0; 3], [3, 3, 3]).unwrap()] {
+        assert_eq!(spilled(&mesh), (0, 0));
+    }
+    let mut mesh = cleave::io::read_mesh(&common::asset("bunny_5k.mesh")).unwrap();
+    let (faces, elements) = (mesh.faces.len(), mesh.elements.len());
+    let (lo, hi) = mesh.bounding_box();
+    let centre: [f64; 3] = std::array::from_fn(|i| 0.5 * (lo[i] + hi[i]));
+    let half = 0.3 * (hi[1] - lo[1]);
+    for i in 0..6 {
+        let x = lo[0] + (0.2 + 0.1 * i as f64) * (hi[0] - lo[0]);
+        let (y, z) = (centre[1], centre[2]);
+        let square =
+            [[x, y - half, z - half], [x, y + half, z - half], [x, y + half, z + half], [x, y - half, z + half]];
+        cleave::topology::cut_by_polygon(&mut mesh, &square, &SplitOptions::default()).unwrap();
+    }
+    let (new_faces, new_elements) = (mesh.faces.len() - faces, mesh.elements.len() - elements);
+    assert!(new_elements > 100, "the cuts made {new_elements} elements: they test nothing");
+    let (spilled_faces, spilled_elements) = spilled(&mesh);
+    println!("spilled: {spilled_faces} of {new_faces} new faces, {spilled_elements} of {new_elements} new elements");
+    assert!(spilled_faces * 50 <= new_faces && spilled_elements * 20 <= new_elements);
 }

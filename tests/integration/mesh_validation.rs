@@ -113,10 +113,10 @@ fn zero_volume_element() {
     let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
     let mesh = PolyMesh {
         nodes,
-        faces: faces.iter().map(|f| Face { vertices: f.to_vec(), triangles: vec![*f] }).collect(),
+        faces: faces.iter().map(|f| Face { vertices: f[..].into(), triangles: [*f][..].into() }).collect(),
         elements: vec![Element {
             faces: (0..4).map(|f| FaceRef { face: f, outward: true }).collect(),
-            nodes: vec![0, 1, 2, 3],
+            nodes: [0, 1, 2, 3][..].into(),
         }],
     };
     let (e, m) = message(mesh.validate());
