@@ -131,36 +131,43 @@ impl CoarseSpace {
         let grouping = coarsen(&graph, count, limit);
         let (ptr, members) = group(&of, count);
         let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-        // the aggregates of a column's rows, each once, as the rows meet them
-        let aggregates_of = |j: usize, seen: &mut Vec<u32>| {
-            seen.clear();
-            for &r in column_rows(j) {
-                let a = of[r as usize];
-                if !seen.contains(&a) {
-                    seen.push(a);
-                }
-            }
-        };
         let (graph_ptr, graph_rows) = graph;
-        let slot_of = |a: u32, b: u32| -> u32 {
-            let rows = &graph_rows[graph_ptr[b as usize] as usize..graph_ptr[b as usize + 1] as usize];
-            let p = rows.binary_search(&a).expect("aggregates of neighbouring blocks are neighbours");
-            graph_ptr[b as usize] + p as u32
-        };
         // every task of columns lists its columns' runs (in parallel, in
-        // order), then the lists are laid end to end
+        // order), then the lists are laid end to end: a column's runs are
+        // the aggregates of its rows, each once, as the rows meet them
+        // (marked with the column), and each one's slot among the
+        // neighbours of the column's own aggregate (looked up in a table
+        // of that aggregate's neighbours, which consecutive columns mostly
+        // share: aggregates are founded in block order)
         let tasks: Vec<std::ops::Range<usize>> =
             (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
         let listed: Vec<(Vec<u32>, Vec<u32>, Vec<u32>)> = tasks
             .into_par_iter()
             .map(|columns| {
-                let (mut seen, mut counts, mut aggregates, mut slots) =
-                    (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                let (mut counts, mut aggregates, mut slots) = (Vec::new(), Vec::new(), Vec::new());
+                let (mut marked, mut slot_in, mut table_of) = (vec![FREE; count], vec![0u32; count], FREE);
                 for j in columns {
-                    aggregates_of(j, &mut seen);
-                    counts.push(seen.len() as u32);
-                    aggregates.extend_from_slice(&seen);
-                    slots.extend(seen.iter().map(|&a| slot_of(a, of[j])));
+                    let b = of[j];
+                    let neighbours = graph_ptr[b as usize]..graph_ptr[b as usize + 1];
+                    if table_of != b {
+                        neighbours.clone().for_each(|p| slot_in[graph_rows[p as usize] as usize] = p);
+                        table_of = b;
+                    }
+                    let before = aggregates.len();
+                    for &r in column_rows(j) {
+                        let a = of[r as usize];
+                        if marked[a as usize] != j as u32 {
+                            marked[a as usize] = j as u32;
+                            let slot = slot_in[a as usize];
+                            assert!(
+                                neighbours.contains(&slot) && graph_rows[slot as usize] == a,
+                                "aggregates of neighbouring blocks are neighbours"
+                            );
+                            aggregates.push(a);
+                            slots.push(slot);
+                        }
+                    }
+                    counts.push((aggregates.len() - before) as u32);
                 }
                 (counts, aggregates, slots)
             })
