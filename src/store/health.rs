@@ -61,43 +61,49 @@ impl HealthFloors {
     }
 }
 
-/// Computes `λ₇ / λ_max` of every entry of every batch into its
-/// `stiffness_ratio` and checks every entry against `floors`; on failure,
-/// names, in the first batch with a failing entry, the failing entry with
-/// the smallest element id (so the error does not depend on the thread
-/// count).
-pub(super) fn check_all(batches: &mut [Batch], floors: &HealthFloors) -> Result<(), BasisError> {
-    let verdicts = assess(batches, floors);
-    record(batches, verdicts)
+/// Computes `λ₇ / λ_max` of every entry of every batch `b` from entry
+/// `first[b]` on into its `stiffness_ratio` and checks those entries
+/// against `floors`; on failure, names, in the first batch with a failing
+/// entry, the failing entry with the smallest element id (so the error
+/// does not depend on the thread count).
+pub(super) fn check_all(batches: &mut [Batch], first: &[usize], floors: &HealthFloors) -> Result<(), BasisError> {
+    let verdicts = assess(batches, first, floors);
+    record(batches, first, verdicts)
 }
 
-/// The verdict on every entry of every batch: its `λ₇ / λ_max`, or the
-/// first of `floors` it fails.
-pub(super) fn assess(batches: &[Batch], floors: &HealthFloors) -> Vec<Vec<Result<f64, BasisError>>> {
-    let spectra = spectra(batches);
-    batches.iter().zip(spectra).map(|(batch, spectra)| verdicts(batch, &spectra, floors)).collect()
+/// The verdict on every entry of every batch `b` from entry `first[b]` on:
+/// its `λ₇ / λ_max`, or the first of `floors` it fails.
+pub(super) fn assess(batches: &[Batch], first: &[usize], floors: &HealthFloors) -> Vec<Vec<Result<f64, BasisError>>> {
+    let spectra = spectra(batches, first);
+    (batches.iter().zip(first).zip(spectra))
+        .map(|((batch, &from), spectra)| verdicts(batch, from, &spectra, floors))
+        .collect()
 }
 
-/// Stores the ratios of `verdicts` (of [`assess`], 0 for a failed entry)
-/// in the batches and returns the error [`check_all`] names, if any.
-pub(super) fn record(batches: &mut [Batch], verdicts: Vec<Vec<Result<f64, BasisError>>>) -> Result<(), BasisError> {
+/// Stores the ratios of `verdicts` (of [`assess`] from the same `first`, 0
+/// for a failed entry) in the batches and returns the error [`check_all`]
+/// names, if any.
+pub(super) fn record(
+    batches: &mut [Batch],
+    first: &[usize],
+    verdicts: Vec<Vec<Result<f64, BasisError>>>,
+) -> Result<(), BasisError> {
     let mut first_failure: Option<BasisError> = None;
-    for (batch, verdicts) in batches.iter_mut().zip(verdicts) {
+    for ((batch, &from), verdicts) in batches.iter_mut().zip(first).zip(verdicts) {
         let mut worst: Option<BasisError> = None;
-        let mut stored = Vec::with_capacity(verdicts.len());
+        batch.stiffness_ratio.resize(batch.len(), 0.0);
         for (i, r) in verdicts.into_iter().enumerate() {
-            match r {
-                Ok(ratio) => stored.push(ratio),
+            batch.stiffness_ratio[from + i] = match r {
+                Ok(ratio) => ratio,
                 Err(e) => {
-                    stored.push(0.0);
-                    let first = worst.as_ref().is_none_or(|w| (batch.elements[i] as usize) < w.element());
+                    let first = worst.as_ref().is_none_or(|w| (batch.elements[from + i] as usize) < w.element());
                     if first {
                         worst = Some(e);
                     }
+                    0.0
                 }
-            }
+            };
         }
-        batch.stiffness_ratio = stored;
         if first_failure.is_none() {
             first_failure = worst;
         }
@@ -105,10 +111,11 @@ pub(super) fn record(batches: &mut [Batch], verdicts: Vec<Vec<Result<f64, BasisE
     first_failure.map_or(Ok(()), Err)
 }
 
-/// The verdict on every entry of `batch`, whose entries have the `spectra`.
-fn verdicts(batch: &Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Vec<Result<f64, BasisError>> {
+/// The verdict on every entry of `batch` from entry `from` on, whose
+/// entries have the `spectra`.
+fn verdicts(batch: &Batch, from: usize, spectra: &[Spectrum], floors: &HealthFloors) -> Vec<Result<f64, BasisError>> {
     let k = batch.k;
-    (0..batch.len())
+    (from..batch.len())
         .into_par_iter()
         .map(|i| {
             let element = batch.elements[i] as usize;
@@ -118,7 +125,7 @@ fn verdicts(batch: &Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Vec<R
                 let fraction = share[a] * k as f64;
                 return Err(BasisError::LightNode { element, node, fraction, floor: floors.mass_fraction });
             }
-            let s = spectra[i];
+            let s = spectra[i - from];
             if !(s.rigid_residual <= floors.rigid_residual) {
                 return Err(BasisError::RigidModes { element, residual: s.rigid_residual });
             }
@@ -137,18 +144,19 @@ fn verdicts(batch: &Batch, spectra: &[Spectrum], floors: &HealthFloors) -> Vec<R
 const SPECTRUM_RUN: usize = 32;
 const TET_RUN: usize = 128;
 
-/// The spectrum of every entry of every batch: closed form for
-/// tetrahedra, else estimated from its `K_e`, runs of entries side by side
-/// in SIMD lanes (each entry's estimate the same whichever run holds it),
-/// the runs of all batches in one parallel pass (a cut makes a dozen
-/// batches, most of a few elements).
-fn spectra(batches: &[Batch]) -> Vec<Vec<Spectrum>> {
+/// The spectrum of every entry of every batch `b` from entry `first[b]`
+/// on: closed form for tetrahedra, else estimated from its `K_e`, runs of
+/// entries side by side in SIMD lanes (each entry's estimate the same
+/// whichever run holds it), the runs of all batches in one parallel pass
+/// (a cut makes a dozen batches, most of a few elements).
+fn spectra(batches: &[Batch], first: &[usize]) -> Vec<Vec<Spectrum>> {
     let runs: Vec<(usize, std::ops::Range<usize>)> = batches
         .iter()
+        .zip(first)
         .enumerate()
-        .flat_map(|(b, batch)| {
-            let run = if batch.is_tet() { TET_RUN } else { SPECTRUM_RUN };
-            (0..batch.len()).step_by(run).map(move |first| (b, first..(first + run).min(batch.len())))
+        .flat_map(|(b, (batch, &from))| {
+            let run = if batch.kind == ElementKind::LinearTet { TET_RUN } else { SPECTRUM_RUN };
+            (from..batch.len()).step_by(run).map(move |start| (b, start..(start + run).min(batch.len())))
         })
         .collect();
     let estimates: Vec<Vec<Spectrum>> = runs
@@ -158,7 +166,7 @@ fn spectra(batches: &[Batch]) -> Vec<Vec<Spectrum>> {
             let (k, n) = (batch.k, 3 * batch.k);
             let mut out = vec![Spectrum::default(); range.len()];
             let x = &batch.rest[range.start * k..range.end * k];
-            if batch.is_tet() {
+            if batch.kind == ElementKind::LinearTet {
                 // the nonzero spectrum of a 6 x 6 matrix
                 let (g, volume) = (&batch.stress_grads[range.start * 4..range.end * 4], &batch.volume[range.clone()]);
                 tet_spectra(x, g, volume, batch.lame.0, batch.lame.1, &mut out);
@@ -175,7 +183,8 @@ fn spectra(batches: &[Batch]) -> Vec<Vec<Spectrum>> {
             out
         })
         .collect();
-    let mut per_batch: Vec<Vec<Spectrum>> = batches.iter().map(|b| Vec::with_capacity(b.len())).collect();
+    let mut per_batch: Vec<Vec<Spectrum>> =
+        batches.iter().zip(first).map(|(b, &from)| Vec::with_capacity(b.len() - from)).collect();
     for ((b, _), run) in runs.iter().zip(estimates) {
         per_batch[*b].extend(run);
     }

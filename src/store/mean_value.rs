@@ -31,14 +31,16 @@ struct Scratch {
     stack: MemBuffer,
 }
 
-/// Builds the batch of `k`-vertex mean value elements `elements`.
+/// Builds the `k`-vertex mean value elements `elements` into the end of
+/// their batch in `batches` (see [`fill_batch`]).
 pub(super) fn build_batch(
+    batches: &mut Vec<Batch>,
     mesh: &PolyMesh,
     material: &Material,
     rule: QuadratureRule,
     k: usize,
-    elements: Vec<u32>,
-) -> Result<Batch, BasisError> {
+    elements: &[u32],
+) -> Result<(), BasisError> {
     let (lambda, mu_lame) = material.lame();
     let nt = 2 * k - 4;
     let nq = match rule {
@@ -57,7 +59,7 @@ pub(super) fn build_batch(
         mu: vec![0.0; paper_rule_len(k, nt)],
         stack: MemBuffer::new(mean_value::evaluate_scratch(k, nt)),
     };
-    fill_batch(mesh, material, ElementKind::MeanValue, k, nq, elements, true, scratch, |s, slot| {
+    fill_batch(batches, mesh, material, ElementKind::MeanValue, k, nq, elements, true, scratch, |s, slot| {
         let Slots {
             element,
             verts,

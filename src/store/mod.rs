@@ -156,7 +156,7 @@ pub enum Family {
 }
 
 /// All elements with `k` nodes, as structure of arrays.
-#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Batch {
     /// Nodes per element.
     pub k: usize,
@@ -212,30 +212,89 @@ impl Batch {
         &self.nodes[i * self.k..(i + 1) * self.k]
     }
 
-    /// Removes entry `i`; the last entry takes its place in every
-    /// per-element array (each holds the same number of values per element,
-    /// possibly none).
-    fn swap_remove(&mut self, i: usize) {
-        fn take_last<T: Copy>(v: &mut Vec<T>, i: usize, n: usize) {
+    /// Copies entry `from` over entry `to` in every per-element array (each
+    /// holds the same number of values per element, possibly none); entry
+    /// `from` is left to be dropped (its basis, if any, swapped in).
+    fn copy_entry(&mut self, from: usize, to: usize) {
+        fn copy<T: Copy>(v: &mut [T], n: usize, from: usize, to: usize) {
             let per = v.len() / n;
-            v.copy_within((n - 1) * per.., i * per);
-            v.truncate((n - 1) * per);
+            v.copy_within(from * per..(from + 1) * per, to * per);
         }
         let n = self.len();
-        take_last(&mut self.elements, i, n);
-        take_last(&mut self.nodes, i, n);
-        take_last(&mut self.rest, i, n);
-        take_last(&mut self.volume, i, n);
-        take_last(&mut self.mass_fraction, i, n);
-        take_last(&mut self.stiffness, i, n);
-        take_last(&mut self.stress_grads, i, n);
-        take_last(&mut self.triangles, i, n);
-        take_last(&mut self.points, i, n);
-        take_last(&mut self.weights, i, n);
-        take_last(&mut self.stiffness_ratio, i, n);
-        if !self.dg.is_empty() {
-            self.dg.swap_remove(i);
+        if from == to {
+            return;
         }
+        copy(&mut self.elements, n, from, to);
+        copy(&mut self.nodes, n, from, to);
+        copy(&mut self.rest, n, from, to);
+        copy(&mut self.volume, n, from, to);
+        copy(&mut self.mass_fraction, n, from, to);
+        copy(&mut self.stiffness, n, from, to);
+        copy(&mut self.stress_grads, n, from, to);
+        copy(&mut self.triangles, n, from, to);
+        copy(&mut self.points, n, from, to);
+        copy(&mut self.weights, n, from, to);
+        copy(&mut self.stiffness_ratio, n, from, to);
+        if !self.dg.is_empty() {
+            self.dg.swap(from, to);
+        }
+    }
+
+    /// Keeps the first `len` entries.
+    fn truncate(&mut self, len: usize) {
+        fn keep<T>(v: &mut Vec<T>, n: usize, len: usize) {
+            if let Some(per) = v.len().checked_div(n) {
+                v.truncate(len * per);
+            }
+        }
+        let n = self.len();
+        keep(&mut self.nodes, n, len);
+        keep(&mut self.rest, n, len);
+        keep(&mut self.volume, n, len);
+        keep(&mut self.mass_fraction, n, len);
+        keep(&mut self.stiffness, n, len);
+        keep(&mut self.stress_grads, n, len);
+        keep(&mut self.triangles, n, len);
+        keep(&mut self.points, n, len);
+        keep(&mut self.weights, n, len);
+        keep(&mut self.stiffness_ratio, n, len);
+        keep(&mut self.dg, n, len);
+        self.elements.truncate(len);
+    }
+
+    /// Appends the `elements` (mesh ids) with their nodes and rest
+    /// positions gathered from `mesh`, every other per-element array
+    /// zero-filled: `stiffness` values, `triangles` and `quadrature` points
+    /// per element as given (the quadrature's stride only where the batch
+    /// stores points).
+    fn extend_gathered(
+        &mut self,
+        mesh: &PolyMesh,
+        elements: &[u32],
+        stiffness: usize,
+        triangles: usize,
+        quadrature: usize,
+    ) {
+        let (k, n) = (self.k, self.len() + elements.len());
+        self.elements.extend_from_slice(elements);
+        let start = self.nodes.len();
+        self.nodes.extend(elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()));
+        self.rest.extend(self.nodes[start..].iter().map(|&v| mesh.nodes[v as usize]));
+        self.volume.resize(n, 0.0);
+        self.mass_fraction.resize(n * k, 0.0);
+        self.stiffness.resize(n * stiffness, 0.0);
+        self.stress_grads.resize(n * k, [0.0; 3]);
+        self.triangles.resize(n * triangles, [0; 3]);
+        self.points.resize(n * quadrature, [0.0; 3]);
+        self.weights.resize(n * quadrature, 0.0);
+        self.stiffness_ratio.resize(n, 0.0);
+    }
+
+    /// Removes entry `i`; the last entry takes its place.
+    fn swap_remove(&mut self, i: usize) {
+        let last = self.len() - 1;
+        self.copy_entry(last, i);
+        self.truncate(last);
     }
 
     /// Appends the entries of `other` (same kind, `k` and quadrature size).
@@ -258,17 +317,6 @@ impl Batch {
     #[inline]
     fn mass_share(&self, i: usize, a: usize, density: f64) -> f64 {
         self.mass_fraction[i * self.k + a] * self.volume[i] * density
-    }
-
-    /// A batch of the same kind, `k`, material and quadrature with no entries.
-    fn empty_like(&self) -> Batch {
-        Batch {
-            k: self.k,
-            kind: self.kind,
-            lame: self.lame,
-            points_per_element: self.points_per_element,
-            ..Default::default()
-        }
     }
 
     /// Whether the batch holds closed-form linear tetrahedra.
@@ -350,12 +398,157 @@ impl Batch {
     }
 }
 
-/// Points `locate` of every entry of `batch`, batch `b` of its store, at
-/// its place.
-fn locate_entries(locate: &mut [(u32, u32)], b: usize, batch: &Batch) {
-    for (i, &e) in batch.elements.iter().enumerate() {
+/// Points `locate` of every entry of `batch` from entry `first` on, batch
+/// `b` of its store, at its place.
+fn locate_entries(locate: &mut [(u32, u32)], b: usize, batch: &Batch, first: usize) {
+    for (i, &e) in batch.elements.iter().enumerate().skip(first) {
         locate[e as usize] = (b as u32, i as u32);
     }
+}
+
+/// The batch of `kind`, `k` and `nq` quadrature points per element in
+/// `batches`, appended (empty, with the Lamé parameters `lame`) if there
+/// is none.
+fn batch_for(batches: &mut Vec<Batch>, kind: ElementKind, k: usize, nq: usize, lame: (f64, f64)) -> &mut Batch {
+    let b = match batches.iter().position(|b| b.kind == kind && b.k == k && b.points_per_element == nq) {
+        Some(b) => b,
+        None => {
+            batches.push(Batch { k, kind, lame, points_per_element: nq, ..Default::default() });
+            batches.len() - 1
+        }
+    };
+    &mut batches[b]
+}
+
+/// Builds the `elements` (mesh ids) into `batches`, each batch's new
+/// entries past its old ones (new batches appended for new kinds, vertex
+/// counts or quadratures), and checks their health (see
+/// [`ElementStore::build`]); returns the number of faces a discontinuous
+/// Galerkin build integrated. On error every batch is as it was.
+fn build_into(
+    batches: &mut Vec<Batch>,
+    mesh: &PolyMesh,
+    material: &Material,
+    options: &BasisOptions,
+    elements: &[u32],
+    inherit: &(dyn Fn(u32) -> Option<dg::DgBasis> + Sync),
+) -> Result<usize, BasisError> {
+    let old_len: Vec<usize> = batches.iter().map(Batch::len).collect();
+    let built = build_new_entries(batches, mesh, material, options, elements, inherit);
+    if built.is_err() {
+        batches.truncate(old_len.len());
+        for (batch, &len) in batches.iter_mut().zip(&old_len) {
+            batch.truncate(len);
+        }
+    }
+    built
+}
+
+/// [`build_into`] without putting the batches back on error.
+fn build_new_entries(
+    batches: &mut Vec<Batch>,
+    mesh: &PolyMesh,
+    material: &Material,
+    options: &BasisOptions,
+    elements: &[u32],
+    inherit: &(dyn Fn(u32) -> Option<dg::DgBasis> + Sync),
+) -> Result<usize, BasisError> {
+    let mut by_kind: std::collections::BTreeMap<(ElementKind, usize), Vec<u32>> = Default::default();
+    let mut faces_integrated = 0;
+    for &e in elements {
+        let (el, e) = (&mesh.elements[e as usize], e as usize);
+        let k = el.nodes.len();
+        if k > MAX_NODES {
+            return Err(BasisError::TooManyVertices { element: e, vertices: k, max: MAX_NODES });
+        }
+        let kind = match (k, options.family) {
+            (_, Family::Dg) => ElementKind::Dg,
+            (4, _) => ElementKind::LinearTet,
+            (_, Family::MeanValue) => ElementKind::MeanValue,
+            (_, Family::Harmonic)
+                if options.harmonic.trilinear_hexahedra && trilinear::hex_corners(mesh, e).is_some() =>
+            {
+                ElementKind::Trilinear
+            }
+            (_, Family::Harmonic) => ElementKind::Harmonic,
+        };
+        // one batch holds every discontinuous Galerkin element: its
+        // size is the number of basis functions, whatever the vertices
+        let k = if kind == ElementKind::Dg { options.dg.size() } else { k };
+        by_kind.entry((kind, k)).or_default().push(e as u32);
+    }
+    let face_bases = if by_kind.keys().any(|(kind, _)| *kind == ElementKind::Harmonic) {
+        let harmonic: Vec<u32> = by_kind
+            .iter()
+            .filter(|((kind, _), _)| *kind == ElementKind::Harmonic)
+            .flat_map(|(_, v)| v.iter().copied())
+            .collect();
+        harmonic::face_bases(mesh, &harmonic, &options.harmonic)?
+    } else {
+        Vec::new()
+    };
+    let mut first: Vec<usize> = batches.iter().map(Batch::len).collect();
+    for ((kind, k), elements) in by_kind {
+        match kind {
+            ElementKind::LinearTet => tet::build_batch(batches, mesh, material, &elements)?,
+            ElementKind::MeanValue => {
+                mean_value::build_batch(batches, mesh, material, options.quadrature, k, &elements)?
+            }
+            ElementKind::Trilinear => trilinear::build_batch(batches, mesh, material, &elements)?,
+            ElementKind::Harmonic => {
+                harmonic::build_batch(batches, mesh, material, &face_bases, &options.harmonic, k, &elements)?
+            }
+            ElementKind::Dg => {
+                let (mut batch, integrated) = dg::build_batch(mesh, material, &options.dg, elements, inherit)?;
+                faces_integrated += integrated;
+                batch.stiffness_ratio = vec![0.0; batch.len()];
+                batch_for(batches, batch.kind, batch.k, batch.points_per_element, batch.lame).append(batch);
+            }
+        }
+    }
+    // (a batch made here holds only new entries)
+    first.resize(batches.len(), 0);
+    let mut verdicts = health::assess(batches, &first, &options.health);
+    let refined = match options.quadrature {
+        QuadratureRule::Consistent => take_soft_mean_value(batches, &first, &mut verdicts),
+        _ => Default::default(),
+    };
+    health::record(batches, &first, verdicts)?;
+    let mut first: Vec<usize> = batches.iter().map(Batch::len).collect();
+    for (k, elements) in refined {
+        let rule = QuadratureRule::ConsistentGauss(REFINED_QUADRATURE_ORDER);
+        mean_value::build_batch(batches, mesh, material, rule, k, &elements)?;
+    }
+    first.resize(batches.len(), 0);
+    health::check_all(batches, &first, &options.health)?;
+    Ok(faces_integrated)
+}
+
+/// Removes from the new entries of the mean value `batches` (those from
+/// `first[b]` on, with their `verdicts`) the entries whose one failure is
+/// a soft mode, and returns their element ids by vertex count, to be built
+/// again with the finer rule.
+fn take_soft_mean_value(
+    batches: &mut [Batch],
+    first: &[usize],
+    verdicts: &mut [Vec<Result<f64, BasisError>>],
+) -> std::collections::BTreeMap<usize, Vec<u32>> {
+    let mut soft: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
+    for ((batch, verdicts), &from) in batches.iter_mut().zip(verdicts.iter_mut()).zip(first) {
+        if batch.kind != ElementKind::MeanValue {
+            continue;
+        }
+        let failing = (0..verdicts.len()).filter(|&i| matches!(verdicts[i], Err(BasisError::SoftElement { .. })));
+        // (from the last: the entry moved into a freed place, the batch's
+        // last, is never one still to be removed)
+        for i in failing.collect::<Vec<_>>().into_iter().rev() {
+            soft.entry(batch.k).or_default().push(batch.elements[from + i]);
+            batch.swap_remove(from + i);
+            let _soft = verdicts.swap_remove(i);
+        }
+    }
+    soft.values_mut().for_each(|elements| elements.sort_unstable());
+    soft
 }
 
 /// Gauss–Legendre order per direction of the rule that integrates the mean
@@ -423,7 +616,7 @@ pub struct StoreChanges {
 }
 
 /// Every element of a mesh, batched by vertex count.
-#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ElementStore {
     /// Batches, one per `(kind, k)` and quadrature size: in increasing
     /// `(kind, k)` when built, then the mean value elements the finer rule
@@ -469,8 +662,14 @@ impl ElementStore {
     /// triangle, 1.5e-5 converged with 512.) An element still soft is the
     /// error it was.
     pub fn build(mesh: &PolyMesh, material: &Material, options: &BasisOptions) -> Result<Self, BasisError> {
-        let all = 0..mesh.elements.len() as u32;
-        Self::build_elements(mesh, material, options, all, &|_| None).map(|(store, _)| store)
+        let mut store = ElementStore::default();
+        let all: Vec<u32> = (0..mesh.elements.len() as u32).collect();
+        build_into(&mut store.batches, mesh, material, options, &all, &|_| None)?;
+        store.locate = vec![(u32::MAX, u32::MAX); mesh.elements.len()];
+        for (b, batch) in store.batches.iter().enumerate() {
+            locate_entries(&mut store.locate, b, batch, 0);
+        }
+        Ok(store)
     }
 
     /// Rebuilds the data of the `changed` elements (mesh ids; ids past the
@@ -479,6 +678,14 @@ impl ElementStore {
     /// filled by their batch's last entry, rebuilt ones are appended. Returns
     /// those moves, so that per-element state kept elsewhere (rotations)
     /// can follow them. On error the store is unchanged.
+    ///
+    /// The rebuilt entries are built in place, past the end of their
+    /// batches; the removals then run among the old entries, and the last
+    /// of the new entries fill the places they left at the old entries'
+    /// end: what moves is as many entries as were removed (a blade cut
+    /// across bunny_100k removes few of the polyhedra it rebuilds), not
+    /// every rebuilt one. The new entries of a batch hold one contiguous
+    /// stretch, in an order the moves rotate.
     pub fn update(
         &mut self,
         mesh: &PolyMesh,
@@ -489,41 +696,46 @@ impl ElementStore {
     ) -> Result<StoreChanges, BasisError> {
         // a discontinuous Galerkin element keeps its frame and the moments
         // of its unchanged faces; a new one takes its parent's
+        let (batches, locate) = (&mut self.batches, &mut self.locate);
         let inherit = |e: u32| -> Option<dg::DgBasis> {
             let from = parents.iter().find(|p| p.0 == e).map_or(e, |p| p.1);
-            let &(b, i) = self.locate.get(from as usize)?;
-            self.batches.get(b as usize)?.dg.get(i as usize).cloned()
+            let &(b, i) = locate.get(from as usize)?;
+            batches.get(b as usize)?.dg.get(i as usize).cloned()
         };
-        let (fresh, faces_integrated) =
-            Self::build_elements(mesh, material, options, changed.iter().copied(), &inherit)?;
+        let inherited: std::collections::HashMap<u32, dg::DgBasis> = match options.family {
+            Family::Dg => changed.iter().filter_map(|&e| Some((e, inherit(e)?))).collect(),
+            _ => Default::default(),
+        };
+        let inherit = |e: u32| inherited.get(&e).cloned();
+        let old_len: Vec<usize> = batches.iter().map(Batch::len).collect();
+        let faces_integrated = build_into(batches, mesh, material, options, changed, &inherit)?;
         let mut moves = StoreChanges { faces_integrated, ..Default::default() };
+        // the removals, among each batch's old entries
+        let mut end = old_len.clone();
         for &e in changed {
-            if let Some(&(b, i)) = self.locate.get(e as usize) {
-                let batch = &mut self.batches[b as usize];
-                batch.swap_remove(i as usize);
+            if let Some(&(b, i)) = locate.get(e as usize) {
+                let (batch, last) = (&mut batches[b as usize], &mut end[b as usize]);
+                *last -= 1;
+                batch.copy_entry(*last, i as usize);
                 moves.removed.push((b, i));
-                if let Some(&moved) = batch.elements.get(i as usize) {
-                    self.locate[moved as usize] = (b, i);
+                if (i as usize) < *last {
+                    locate[batch.elements[i as usize] as usize] = (b, i);
                 }
             }
         }
-        self.locate.resize(mesh.elements.len(), (u32::MAX, u32::MAX));
-        for batch in fresh.batches {
-            let same =
-                |b: &Batch| b.kind == batch.kind && b.k == batch.k && b.points_per_element == batch.points_per_element;
-            let b = match self.batches.iter().position(same) {
-                Some(b) => b,
-                None => {
-                    self.batches.push(batch.empty_like());
-                    self.batches.len() - 1
-                }
-            };
-            let start = self.batches[b].len();
-            for (i, &e) in batch.elements.iter().enumerate() {
-                self.locate[e as usize] = (b as u32, (start + i) as u32);
+        // the new entries close up behind the old ones
+        locate.resize(mesh.elements.len(), (u32::MAX, u32::MAX));
+        for (b, batch) in batches.iter_mut().enumerate() {
+            let (before, kept) = (old_len.get(b).copied().unwrap_or(0), end.get(b).copied().unwrap_or(0));
+            let fresh = batch.len() - before;
+            for (hole, from) in (kept..before).zip((before.max(batch.len() - (before - kept))..batch.len()).rev()) {
+                batch.copy_entry(from, hole);
             }
-            moves.appended.push((b as u32, start as u32, batch.len() as u32));
-            self.batches[b].append(batch);
+            batch.truncate(kept + fresh);
+            if fresh > 0 {
+                moves.appended.push((b as u32, kept as u32, fresh as u32));
+                locate_entries(locate, b, batch, kept);
+            }
         }
         Ok(moves)
     }
@@ -542,118 +754,6 @@ impl ElementStore {
     /// these are the nodes the elements had before the change.
     pub fn nodes_of(&self, elements: &[u32]) -> Vec<u32> {
         elements.iter().flat_map(|&e| self.element_nodes(e).iter().copied()).collect()
-    }
-
-    /// The store of the listed elements only (`locate` covers the whole
-    /// mesh; unlisted elements are located nowhere).
-    fn build_elements(
-        mesh: &PolyMesh,
-        material: &Material,
-        options: &BasisOptions,
-        elements: impl Iterator<Item = u32>,
-        inherit: &(dyn Fn(u32) -> Option<dg::DgBasis> + Sync),
-    ) -> Result<(Self, usize), BasisError> {
-        let mut by_kind: std::collections::BTreeMap<(ElementKind, usize), Vec<u32>> = Default::default();
-        let mut faces_integrated = 0;
-        for e in elements {
-            let (el, e) = (&mesh.elements[e as usize], e as usize);
-            let k = el.nodes.len();
-            if k > MAX_NODES {
-                return Err(BasisError::TooManyVertices { element: e, vertices: k, max: MAX_NODES });
-            }
-            let kind = match (k, options.family) {
-                (_, Family::Dg) => ElementKind::Dg,
-                (4, _) => ElementKind::LinearTet,
-                (_, Family::MeanValue) => ElementKind::MeanValue,
-                (_, Family::Harmonic)
-                    if options.harmonic.trilinear_hexahedra && trilinear::hex_corners(mesh, e).is_some() =>
-                {
-                    ElementKind::Trilinear
-                }
-                (_, Family::Harmonic) => ElementKind::Harmonic,
-            };
-            // one batch holds every discontinuous Galerkin element: its
-            // size is the number of basis functions, whatever the vertices
-            let k = if kind == ElementKind::Dg { options.dg.size() } else { k };
-            by_kind.entry((kind, k)).or_default().push(e as u32);
-        }
-        let face_bases = if by_kind.keys().any(|(kind, _)| *kind == ElementKind::Harmonic) {
-            let harmonic: Vec<u32> = by_kind
-                .iter()
-                .filter(|((kind, _), _)| *kind == ElementKind::Harmonic)
-                .flat_map(|(_, v)| v.iter().copied())
-                .collect();
-            harmonic::face_bases(mesh, &harmonic, &options.harmonic)?
-        } else {
-            Vec::new()
-        };
-        let mut store = ElementStore { batches: Vec::new(), locate: vec![(u32::MAX, u32::MAX); mesh.elements.len()] };
-        for ((kind, k), elements) in by_kind {
-            let batch = match kind {
-                ElementKind::LinearTet => tet::build_batch(mesh, material, elements)?,
-                ElementKind::MeanValue => mean_value::build_batch(mesh, material, options.quadrature, k, elements)?,
-                ElementKind::Trilinear => trilinear::build_batch(mesh, material, elements)?,
-                ElementKind::Harmonic => {
-                    harmonic::build_batch(mesh, material, &face_bases, &options.harmonic, k, elements)?
-                }
-                ElementKind::Dg => {
-                    let (batch, integrated) = dg::build_batch(mesh, material, &options.dg, elements, inherit)?;
-                    faces_integrated += integrated;
-                    batch
-                }
-            };
-            store.push_located(batch);
-        }
-        let mut verdicts = health::assess(&store.batches, &options.health);
-        let refined = match options.quadrature {
-            QuadratureRule::Consistent => store.take_soft_mean_value(&mut verdicts),
-            _ => Default::default(),
-        };
-        health::record(&mut store.batches, verdicts)?;
-        for (k, elements) in refined {
-            let rule = QuadratureRule::ConsistentGauss(REFINED_QUADRATURE_ORDER);
-            let mut batch = [mean_value::build_batch(mesh, material, rule, k, elements)?];
-            health::check_all(&mut batch, &options.health)?;
-            let [batch] = batch;
-            store.push_located(batch);
-        }
-        Ok((store, faces_integrated))
-    }
-
-    /// Appends `batch` and locates its entries there.
-    fn push_located(&mut self, batch: Batch) {
-        locate_entries(&mut self.locate, self.batches.len(), &batch);
-        self.batches.push(batch);
-    }
-
-    /// Removes from the mean value batches (with their `verdicts`) the
-    /// entries whose one failure is a soft mode, and returns their element
-    /// ids by vertex count, to be built again with the finer rule.
-    fn take_soft_mean_value(
-        &mut self,
-        verdicts: &mut [Vec<Result<f64, BasisError>>],
-    ) -> std::collections::BTreeMap<usize, Vec<u32>> {
-        let mut soft: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
-        for (b, (batch, verdicts)) in self.batches.iter_mut().zip(verdicts.iter_mut()).enumerate() {
-            if batch.kind != ElementKind::MeanValue {
-                continue;
-            }
-            let failing: Vec<usize> =
-                (0..verdicts.len()).filter(|&i| matches!(verdicts[i], Err(BasisError::SoftElement { .. }))).collect();
-            if failing.is_empty() {
-                continue;
-            }
-            // (from the last: the entry moved into a freed place is never
-            // one still to be removed)
-            for &i in failing.iter().rev() {
-                soft.entry(batch.k).or_default().push(batch.elements[i]);
-                batch.swap_remove(i);
-                let _soft = verdicts.swap_remove(i);
-            }
-            locate_entries(&mut self.locate, b, batch);
-        }
-        soft.values_mut().for_each(|elements| elements.sort_unstable());
-        soft
     }
 
     /// Lumped nodal masses (kg): `m_i = Σ_e μ_i^e V_e ρ` (wicke2007 eq. 18),
@@ -699,31 +799,37 @@ pub(crate) struct Slots<'a> {
     pub weights: &'a mut [f64],
 }
 
-/// Gathers the batch of `k`-node `elements` (nodes, rest positions and, when
-/// `with_triangles`, the `2k - 4` outward surface triangles in local
-/// indices) and fills every element's slots in parallel, with
-/// per-thread scratch from `scratch`, by `build`; `nq` quadrature points per element.
+/// Gathers the `k`-node `elements` into the end of their batch in
+/// `batches` (of `kind` with `nq` quadrature points per element, appended
+/// if there is none): nodes, rest positions and, when `with_triangles`,
+/// the `2k - 4` outward surface triangles in local indices; then fills
+/// every new element's slots in parallel, with per-thread scratch from
+/// `scratch`, by `build`. On error the batch holds the new entries,
+/// partly filled ([`build_into`] takes them off).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fill_batch<S>(
+    batches: &mut Vec<Batch>,
     mesh: &PolyMesh,
     material: &Material,
     kind: ElementKind,
     k: usize,
     nq: usize,
-    elements: Vec<u32>,
+    elements: &[u32],
     with_triangles: bool,
     scratch: impl Fn() -> S + Sync + Send,
     build: impl Fn(&mut S, Slots) -> Result<(), BasisError> + Sync + Send,
-) -> Result<Batch, BasisError> {
-    let n = elements.len();
-    let nodes: Vec<u32> = elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()).collect();
-    let rest: Vec<[f64; 3]> = nodes.iter().map(|&v| mesh.nodes[v as usize]).collect();
+) -> Result<(), BasisError> {
+    let batch = batch_for(batches, kind, k, nq, material.lame());
+    let (start, n) = (batch.len(), elements.len());
     let nt = if with_triangles { 2 * k - 4 } else { 0 };
-    let mut triangles = vec![[0u32; 3]; n * nt];
+    batch.extend_gathered(mesh, elements, 9 * k * k, nt, nq);
+    let nodes = &batch.nodes[start * k..];
+    let rest = &batch.rest[start * k..];
+    let triangles = &mut batch.triangles[start * nt..];
     if with_triangles {
         // (each element's triangles in its own stretch, in parallel; the
         // first element in order with a wrong count is named)
-        let wrong = triangles.par_chunks_mut(nt.max(1)).zip(&elements).enumerate().find_map_first(|(i, (out, &e))| {
+        let wrong = triangles.par_chunks_mut(nt.max(1)).zip(elements).enumerate().find_map_first(|(i, (out, &e))| {
             let local = &nodes[i * k..(i + 1) * k];
             let mut count = 0;
             for t in mesh.element_triangles(e as usize) {
@@ -739,19 +845,13 @@ pub(crate) fn fill_batch<S>(
             return Err(BasisError::DegenerateElement { element, volume: mesh.element_volume(element) });
         }
     }
-    let mut volume = vec![0.0; n];
-    let mut mass_fraction = vec![0.0; n * k];
-    let mut stiffness = vec![0.0; n * 9 * k * k];
-    let mut stress_grads = vec![[0.0; 3]; n * k];
-    let mut points = vec![[0.0; 3]; n * nq];
-    let mut weights = vec![0.0; n * nq];
-    volume
-        .par_iter_mut()
-        .zip(mass_fraction.par_chunks_mut(k))
-        .zip(stiffness.par_chunks_mut(9 * k * k))
-        .zip(stress_grads.par_chunks_mut(k))
-        .zip(points.par_chunks_mut(nq.max(1)))
-        .zip(weights.par_chunks_mut(nq.max(1)))
+    let triangles = &batch.triangles[start * nt..];
+    (batch.volume[start..].par_iter_mut())
+        .zip(batch.mass_fraction[start * k..].par_chunks_mut(k))
+        .zip(batch.stiffness[start * 9 * k * k..].par_chunks_mut(9 * k * k))
+        .zip(batch.stress_grads[start * k..].par_chunks_mut(k))
+        .zip(batch.points[start * nq..].par_chunks_mut(nq.max(1)))
+        .zip(batch.weights[start * nq..].par_chunks_mut(nq.max(1)))
         .enumerate()
         .try_for_each_init(
             &scratch,
@@ -770,22 +870,6 @@ pub(crate) fn fill_batch<S>(
                 build(s, slots)
             },
         )?;
-    Ok(Batch {
-        k,
-        kind,
-        elements,
-        nodes,
-        rest,
-        volume,
-        mass_fraction,
-        stiffness,
-        lame: material.lame(),
-        stress_grads,
-        triangles,
-        points,
-        weights,
-        points_per_element: nq,
-        stiffness_ratio: Vec::new(),
-        dg: Vec::new(),
-    })
+    debug_assert_eq!(batch.len(), start + n);
+    Ok(())
 }

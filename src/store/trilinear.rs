@@ -131,41 +131,58 @@ pub(super) fn values_at(nodes: &[[f64; 3]], corners: &[usize; 8], x: [f64; 3]) -
     None
 }
 
-/// Builds the batch of trilinear hexahedra `elements`.
-pub(super) fn build_batch(mesh: &PolyMesh, material: &Material, elements: Vec<u32>) -> Result<Batch, BasisError> {
+/// Builds the trilinear hexahedra `elements` into the end of their batch in
+/// `batches` (see [`fill_batch`]).
+pub(super) fn build_batch(
+    batches: &mut Vec<Batch>,
+    mesh: &PolyMesh,
+    material: &Material,
+    elements: &[u32],
+) -> Result<(), BasisError> {
     let (lambda, mu) = material.lame();
     let (k, nq) = (8, 8);
     let (g, gw) = gauss_legendre(2);
     let scratch = || (vec![0.0; 3 * k * nq], vec![0.0; elasticity::stiffness_scratch_len(k, nq)]);
-    fill_batch(mesh, material, ElementKind::Trilinear, k, nq, elements, false, scratch, |(grad, gram), slot| {
-        let Slots { element, verts, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
-        let corners = hex_corners(mesh, element)
-            .ok_or(BasisError::DegenerateElement { element, volume: mesh.element_volume(element) })?;
-        mass_fraction.fill(0.0);
-        stress_grads.fill([0.0; 3]);
-        for q in 0..nq {
-            let xi = [g[q & 1], g[(q >> 1) & 1], g[q >> 2]];
-            let (n, d) = reference(xi);
-            let (det, jinv) = jacobian(verts, &corners, xi)
+    fill_batch(
+        batches,
+        mesh,
+        material,
+        ElementKind::Trilinear,
+        k,
+        nq,
+        elements,
+        false,
+        scratch,
+        |(grad, gram), slot| {
+            let Slots { element, verts, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
+            let corners = hex_corners(mesh, element)
                 .ok_or(BasisError::DegenerateElement { element, volume: mesh.element_volume(element) })?;
-            let w = det * gw[q & 1] * gw[(q >> 1) & 1] * gw[q >> 2];
-            weights[q] = w;
-            points[q] = (0..8).fold([0.0; 3], |p, a| std::array::from_fn(|i| p[i] + n[a] * verts[corners[a]][i]));
-            for (a, &local) in corners.iter().enumerate() {
-                // ∇N = J⁻ᵀ ∇_ξ N: component i = Σ_c J⁻¹[c][i] ∂N/∂ξ_c
-                let gi: [f64; 3] = std::array::from_fn(|i| (0..3).map(|c| jinv[c][i] * d[a][c]).sum());
-                for i in 0..3 {
-                    grad[(3 * local + i) * nq + q] = gi[i];
-                    stress_grads[local][i] += w * gi[i];
+            mass_fraction.fill(0.0);
+            stress_grads.fill([0.0; 3]);
+            for q in 0..nq {
+                let xi = [g[q & 1], g[(q >> 1) & 1], g[q >> 2]];
+                let (n, d) = reference(xi);
+                let (det, jinv) = jacobian(verts, &corners, xi)
+                    .ok_or(BasisError::DegenerateElement { element, volume: mesh.element_volume(element) })?;
+                let w = det * gw[q & 1] * gw[(q >> 1) & 1] * gw[q >> 2];
+                weights[q] = w;
+                points[q] = (0..8).fold([0.0; 3], |p, a| std::array::from_fn(|i| p[i] + n[a] * verts[corners[a]][i]));
+                for (a, &local) in corners.iter().enumerate() {
+                    // ∇N = J⁻ᵀ ∇_ξ N: component i = Σ_c J⁻¹[c][i] ∂N/∂ξ_c
+                    let gi: [f64; 3] = std::array::from_fn(|i| (0..3).map(|c| jinv[c][i] * d[a][c]).sum());
+                    for i in 0..3 {
+                        grad[(3 * local + i) * nq + q] = gi[i];
+                        stress_grads[local][i] += w * gi[i];
+                    }
+                    mass_fraction[local] += w * n[a];
                 }
-                mass_fraction[local] += w * n[a];
             }
-        }
-        let v: f64 = weights.iter().sum();
-        *volume = v;
-        mass_fraction.iter_mut().for_each(|m| *m /= v);
-        stress_grads.iter_mut().for_each(|s| *s = s.map(|c| c / v));
-        elasticity::element_stiffness(grad, weights, k, lambda, mu, gram, stiffness);
-        Ok(())
-    })
+            let v: f64 = weights.iter().sum();
+            *volume = v;
+            mass_fraction.iter_mut().for_each(|m| *m /= v);
+            stress_grads.iter_mut().for_each(|s| *s = s.map(|c| c / v));
+            elasticity::element_stiffness(grad, weights, k, lambda, mu, gram, stiffness);
+            Ok(())
+        },
+    )
 }

@@ -287,6 +287,9 @@ fn a_cut_that_fails_half_way_leaves_the_simulation_as_it_was() {
     assert!(err.to_string().contains("mean nodal mass share"), "{err}");
     assert_eq!(sim.cut_retries(), cleave::sim::CUT_ATTEMPTS - 1);
     assert!(sim.mesh() == &mesh, "the mesh was not restored");
+    // (each attempt built its elements past the end of their batches and
+    // took them off again)
+    assert!(sim.store() == twin.store(), "the element store was not restored");
     assert_eq!((sim.displacements(), sim.velocities()), (&u[..], &v[..]));
     // the pattern, updated beside the store's rebuild, was put back (its
     // columns may sum their elements in another order)

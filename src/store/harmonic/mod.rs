@@ -281,20 +281,22 @@ struct Scratch {
     evaluation: EvaluationWork,
 }
 
-/// Builds the batch of `k`-node harmonic elements `elements`; `faces` holds
-/// the face functions of their faces.
+/// Builds the `k`-node harmonic elements `elements` into the end of their
+/// batch in `batches` (see [`fill_batch`]); `faces` holds the face
+/// functions of their faces.
 pub(super) fn build_batch(
+    batches: &mut Vec<Batch>,
     mesh: &PolyMesh,
     material: &Material,
     faces: &[Option<FaceBasis>],
     options: &HarmonicOptions,
     k: usize,
-    elements: Vec<u32>,
-) -> Result<Batch, BasisError> {
+    elements: &[u32],
+) -> Result<(), BasisError> {
     let (lambda, mu) = material.lame();
     // elements equal up to a translation share one fit and one rule
     // (see [`congruence`]): both are made for the first of each shape
-    let template = congruence::templates(mesh, &elements);
+    let template = congruence::templates(mesh, elements);
     let firsts: Vec<usize> = (0..elements.len()).filter(|&i| template[i] == i).collect();
     let mut copies = vec![0usize; elements.len()];
     template.iter().for_each(|&t| copies[t] += 1);
@@ -324,7 +326,6 @@ pub(super) fn build_batch(
     // where in `fitted` the template of each batch element is
     let mut fit_of = vec![usize::MAX; elements.len()];
     fitted.iter().enumerate().for_each(|(t, f)| fit_of[f.0] = t);
-    let elements_of_batch = elements.clone();
     let index_of: HashMap<u32, usize> = elements.iter().enumerate().map(|(i, &e)| (e, i)).collect();
     let nq = fitted.iter().map(|f| f.1.stiffness().0.len()).max().unwrap_or(0);
     let scratch = || Scratch {
@@ -335,13 +336,13 @@ pub(super) fn build_batch(
         moments: vec![[0.0; 3]; k],
         evaluation: EvaluationWork::default(),
     };
-    fill_batch(mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
+    fill_batch(batches, mesh, material, ElementKind::Harmonic, k, nq, elements, true, scratch, |s, slot| {
         let Slots { element, volume, mass_fraction, stiffness, stress_grads, points, weights, .. } = slot;
         let degenerate = || BasisError::DegenerateElement { element, volume: mesh.element_volume(element) };
         let i = index_of[&(element as u32)];
         let (first, rules, fit) = &fitted[fit_of[template[i]]];
         let (rule_points, rule_weights) = rules.stiffness();
-        let shift = congruence::offset(mesh, elements_of_batch[*first], element as u32);
+        let shift = congruence::offset(mesh, elements[*first], element as u32);
         let m = rule_points.len();
         for (p, q) in points[..m].iter_mut().zip(rule_points) {
             *p = vec3::add(*q, shift);
