@@ -36,7 +36,7 @@ fn pipeline(c: &mut Criterion) {
             values[pattern.diagonal_slot(d)] += 1e3;
         }
         let mut chol = Cholesky::default();
-        chol.analyze(pattern.symbolic.as_ref()).unwrap();
+        chol.analyze(pattern.symbolic()).unwrap();
         group.bench_function(BenchmarkId::new("cholesky_numeric", n), |b| {
             b.iter(|| chol.factor(pattern.matrix(&values)).unwrap())
         });

@@ -161,7 +161,7 @@ mod tests {
         }
         let dense = |values: &[f64]| {
             let mut a = faer::Mat::<f64>::zeros(n, n);
-            let (cp, ri) = (pattern.symbolic.col_ptr(), pattern.symbolic.row_idx());
+            let (cp, ri) = (pattern.symbolic().col_ptr(), pattern.symbolic().row_idx());
             for j in 0..n {
                 for p in cp[j]..cp[j + 1] {
                     a[(ri[p], j)] = values[p];

@@ -1,10 +1,12 @@
 //! The block sparsity pattern and the per-node gather lists that assemble
 //! into it.
 
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use std::sync::OnceLock;
+
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
-use crate::solve::BlockStructure;
+use crate::solve::{BlockStructure, SystemPattern};
 
 use super::{Couplings, MAX_ENTRY_BLOCKS};
 
@@ -46,11 +48,14 @@ struct Incidence {
 pub struct SparsePattern {
     /// Number of blocks (3 scalar unknowns each).
     pub num_blocks: usize,
-    /// The scalar compressed-column structure (`3 * num_blocks` square).
-    pub symbolic: SymbolicSparseColMat<usize>,
-    /// The same structure in 3x3 blocks (what block solvers read): the
-    /// block rows of block column `j` from `col_ptr[3 j] / 9` on.
+    /// The structure in 3x3 blocks (what assembly and block solvers read):
+    /// block column `j`'s block rows, and where its values start.
     blocks: BlockStructure,
+    /// The scalar compressed-column structure (`3 * num_blocks` square),
+    /// made from the blocks when first asked for
+    /// ([`SparsePattern::symbolic`]): a body solved by conjugate gradients
+    /// never needs it.
+    scalar: OnceLock<SymbolicSparseColMat<usize>>,
     /// Scalar offset between consecutive columns of block column `j` (three
     /// times its number of block rows).
     col_stride: Vec<usize>,
@@ -85,10 +90,11 @@ struct Stored<Columns, Incidences, Numbers> {
 
 impl serde::Serialize for SparsePattern {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let symbolic = self.symbolic();
         Stored {
             num_blocks: self.num_blocks,
-            col_ptr: self.symbolic.col_ptr(),
-            row_idx: self.symbolic.row_idx(),
+            col_ptr: symbolic.col_ptr(),
+            row_idx: symbolic.row_idx(),
             col_stride: &self.col_stride[..],
             offsets: &self.offsets[..],
             slot_offsets: &self.slot_offsets[..],
@@ -148,8 +154,8 @@ impl<'de> serde::Deserialize<'de> for SparsePattern {
         let blocks = BlockStructure::new(symbolic.as_ref()).map_err(serde::de::Error::custom)?;
         Ok(SparsePattern {
             num_blocks: nb,
-            symbolic,
             blocks,
+            scalar: OnceLock::from(symbolic),
             col_stride: s.col_stride,
             offsets: s.offsets,
             slot_offsets: s.slot_offsets,
@@ -158,26 +164,6 @@ impl<'de> serde::Deserialize<'de> for SparsePattern {
             diagonal: s.diagonal,
         })
     }
-}
-
-/// The `n x n` compressed columns `col_ptr`, `row_idx`, checked as faer's
-/// `new_checked` checks them (offsets ascending from 0 to the number of
-/// rows, each column's rows strictly ascending below `n`) but with the
-/// columns in parallel: a new pattern holds millions of rows.
-fn checked_columns(n: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>) -> SymbolicSparseColMat<usize> {
-    let offsets_ok = col_ptr.len() == n + 1
-        && col_ptr.first() == Some(&0)
-        && col_ptr.last() == Some(&row_idx.len())
-        && col_ptr.par_windows(2).all(|w| w[0] <= w[1]);
-    let rows_ok = offsets_ok
-        && col_ptr.par_windows(2).all(|w| {
-            let rows = &row_idx[w[0]..w[1]];
-            rows.windows(2).all(|p| p[0] < p[1]) && rows.last().is_none_or(|&r| r < n)
-        });
-    assert!(rows_ok, "the sparse pattern's layout wrote unordered columns");
-    // SAFETY: the invariants faer's constructor would check were checked
-    // just above
-    unsafe { SymbolicSparseColMat::new_unchecked(n, n, col_ptr, None, row_idx) }
 }
 
 /// A raw pointer to the values, shared by the node tasks of one assembly.
@@ -261,27 +247,19 @@ impl NewColumn {
         self.incidences.iter().map(|inc| inc.size as usize).sum()
     }
 
-    /// Writes the column into its stretches of the arrays: the scalar rows
-    /// (`9 len` of `row_out`, the block rows three times over), the block
-    /// rows, the incidences (their slots counted from the node's first) and
-    /// the slots; returns the diagonal block's offset.
+    /// Writes the column into its stretches of the arrays: the block rows,
+    /// the incidences (their slots counted from the node's first) and the
+    /// slots; returns the diagonal block's offset.
     fn write<'a>(
         &self,
         j: usize,
         blocks_of: &impl Fn(u32) -> &'a [u32],
-        row_out: &mut [usize],
         block_out: &mut [u32],
         inc_out: &mut [Incidence],
         slot_out: &mut [u32],
     ) -> u32 {
         let r = &self.rows;
         block_out[..r.len()].copy_from_slice(r);
-        let third = 3 * r.len();
-        for (out, &i) in row_out[..third].chunks_exact_mut(3).zip(r) {
-            out.copy_from_slice(&[3 * i as usize, 3 * i as usize + 1, 3 * i as usize + 2]);
-        }
-        row_out.copy_within(..third, third);
-        row_out.copy_within(..third, 2 * third);
         let position = |i: u32| -> u32 {
             let p = r.binary_search(&i).expect("pattern holds every element pair");
             u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
@@ -370,26 +348,20 @@ fn columns_of<'a, T>(
     crate::stretches(array, lengths).into_iter().skip(1).step_by(2).collect()
 }
 
-/// The scalar column pointers of block columns whose values start at
-/// `values[j]` (the last entry their end), `col_stride[j]` apart.
-fn column_pointers(values: &[usize], col_stride: &[usize]) -> Vec<usize> {
-    let n = 3 * col_stride.len();
-    (0..n).map(|c| values[c / 3] + (c % 3) * col_stride[c / 3]).chain([values[n / 3]]).collect()
-}
-
 /// Offsets into the incidences or the slots, as the pattern keeps them.
 fn narrow(offsets: impl Iterator<Item = usize>) -> Vec<u32> {
     offsets.map(|o| u32::try_from(o).expect("fewer than 2^32 incidences and slots")).collect()
 }
 
-/// The block structure of the compressed columns `symbolic`, whose block
-/// column `j` has its block rows at `rows[col_ptr[3 j] / 9..]`.
-fn block_structure(symbolic: &SymbolicSparseColMat<usize>, rows: Vec<u32>) -> BlockStructure {
-    let cp = symbolic.col_ptr();
-    let blocks = symbolic.ncols() / 3;
-    let ptr = (0..=blocks).map(|j| u32::try_from(cp[3 * j] / 9).expect("fewer than 2^32 blocks")).collect();
-    let start = (0..blocks).map(|j| cp[3 * j]).collect();
-    BlockStructure::from_columns(ptr, rows, start, cp[3 * blocks]).expect("the layout writes ordered block columns")
+/// The block structure of block columns that start at the block rows
+/// `starts` (the last entry their end) in `rows`, their values laid out one
+/// after another.
+fn block_structure(starts: &[usize], rows: Vec<u32>) -> BlockStructure {
+    let ptr = starts.iter().map(|&p| u32::try_from(p).expect("fewer than 2^32 block rows")).collect();
+    let values: Vec<usize> = starts.iter().map(|&p| 9 * p).collect();
+    let nnz = values[values.len() - 1];
+    BlockStructure::from_columns(ptr, rows, values[..values.len() - 1].to_vec(), nnz)
+        .expect("the layout writes ordered block columns")
 }
 
 impl SparsePattern {
@@ -420,8 +392,8 @@ impl SparsePattern {
     pub fn empty() -> Self {
         SparsePattern {
             num_blocks: 0,
-            symbolic: SymbolicSparseColMat::new_checked(0, 0, vec![0], None, Vec::new()),
             blocks: BlockStructure::default(),
+            scalar: OnceLock::new(),
             col_stride: Vec::new(),
             offsets: vec![0],
             slot_offsets: vec![0],
@@ -448,7 +420,7 @@ impl SparsePattern {
     /// reads the mesh's element nodes, which the store keeps in the same
     /// order). Where the entries sit in their groups is filled in by
     /// [`SparsePattern::locate`] once the couplings hold them: until then
-    /// the pattern's structure (`symbolic`, [`SparsePattern::blocks`]) is
+    /// the pattern's structure ([`SparsePattern::blocks`]) is
     /// the new one, but it must not assemble.
     #[must_use = "the pattern assembles only once its entries are located"]
     pub fn update<'a>(
@@ -506,24 +478,21 @@ impl SparsePattern {
         let fresh = |j: usize| new.get(which[j] as usize);
         // where the columns start now: block rows (values in nines),
         // incidences, slots
-        let cp = self.symbolic.col_ptr();
-        let old_rows: Vec<usize> = (0..=kept).map(|j| cp[3 * j] / 9).collect();
+        let ptr = self.blocks.columns().ptr;
+        let old_rows: Vec<usize> = (0..=kept).map(|j| ptr.get(j).map_or(0, |&p| p as usize)).collect();
         let old_incidences: Vec<usize> = self.offsets.iter().map(|&o| o as usize).collect();
         let old_slots: Vec<usize> = self.slot_offsets.iter().map(|&o| o as usize).collect();
         let rows = new_starts(&old_rows, |j| fresh(j).map(|c| c.rows.len()), num_blocks);
         let incidences = new_starts(&old_incidences, |j| fresh(j).map(|c| c.incidences.len()), num_blocks);
         let slots = new_starts(&old_slots, |j| fresh(j).map(NewColumn::slots), num_blocks);
-        let nines = |r: &[usize]| r.iter().map(|&b| 9 * b).collect::<Vec<usize>>();
-        let (old_values, values) = (nines(&old_rows), nines(&rows));
         // the columns that stay the same move, then the new ones are written
-        let (_, _, _, _, mut row_idx) = std::mem::replace(&mut self.symbolic, Self::empty().symbolic).into_parts();
+        // (the scalar structure, if it was made, is made again when asked for)
+        self.scalar = OnceLock::new();
         let mut block_rows = std::mem::take(&mut self.blocks).into_rows();
-        // (the scalar rows, most of the bytes, beside the other arrays)
         let (incidence_array, slot_array) = (&mut self.incidences, &mut self.slots);
         rayon::join(
-            || relocate(&mut row_idx, &dirty, &old_values, &values, 0),
+            || relocate(&mut block_rows, &dirty, &old_rows, &rows, 0),
             || {
-                relocate(&mut block_rows, &dirty, &old_rows, &rows, 0);
                 relocate(incidence_array, &dirty, &old_incidences, &incidences, UNSET);
                 relocate(slot_array, &dirty, &old_slots, &slots, 0);
             },
@@ -531,31 +500,22 @@ impl SparsePattern {
         crate::resize_with_room(&mut self.col_stride, num_blocks, 0);
         crate::resize_with_room(&mut self.diagonal, num_blocks, 0);
         // the new columns written in parallel, each into its own stretches
-        let sizes: Vec<[usize; 4]> =
-            new.iter().map(|c| [9 * c.rows.len(), c.rows.len(), c.incidences.len(), c.slots()]).collect();
-        let row_parts = columns_of(&mut row_idx, &dirty_list, &values, |k| sizes[k][0]);
-        let block_parts = columns_of(&mut block_rows, &dirty_list, &rows, |k| sizes[k][1]);
-        let inc_parts = columns_of(&mut self.incidences, &dirty_list, &incidences, |k| sizes[k][2]);
-        let slot_parts = columns_of(&mut self.slots, &dirty_list, &slots, |k| sizes[k][3]);
-        let diagonals: Vec<u32> = (new.par_iter().zip(&dirty_list).zip(row_parts).zip(block_parts))
+        let sizes: Vec<[usize; 3]> = new.iter().map(|c| [c.rows.len(), c.incidences.len(), c.slots()]).collect();
+        let block_parts = columns_of(&mut block_rows, &dirty_list, &rows, |k| sizes[k][0]);
+        let inc_parts = columns_of(&mut self.incidences, &dirty_list, &incidences, |k| sizes[k][1]);
+        let slot_parts = columns_of(&mut self.slots, &dirty_list, &slots, |k| sizes[k][2]);
+        let diagonals: Vec<u32> = (new.par_iter().zip(&dirty_list).zip(block_parts))
             .zip(inc_parts.into_par_iter().zip(slot_parts))
-            .map(|((((column, &j), row_out), block_out), (inc_out, slot_out))| {
-                column.write(j, blocks_of, row_out, block_out, inc_out, slot_out)
+            .map(|(((column, &j), block_out), (inc_out, slot_out))| {
+                column.write(j, blocks_of, block_out, inc_out, slot_out)
             })
             .collect();
         for ((&j, column), diagonal) in dirty_list.iter().zip(&new).zip(diagonals) {
             (self.diagonal[j], self.col_stride[j]) = (diagonal, 3 * column.rows.len());
         }
-        let n = 3 * num_blocks;
-        let col_ptr = column_pointers(&values, &self.col_stride);
         (self.offsets, self.slot_offsets) = (narrow(incidences.iter().copied()), narrow(slots.iter().copied()));
         self.num_blocks = num_blocks;
-        // SAFETY: the columns follow one another from 0 to the end of the
-        // rows; the kept ones were checked when laid out and only moved, the
-        // new ones hold their sorted, distinct rows below `n`
-        // (`NewColumn::of`)
-        self.symbolic = unsafe { SymbolicSparseColMat::new_unchecked(n, n, col_ptr, None, row_idx) };
-        self.blocks = block_structure(&self.symbolic, block_rows);
+        self.blocks = block_structure(&rows, block_rows);
         Unlocated { columns: dirty_list, vacated }
     }
 
@@ -624,9 +584,7 @@ impl SparsePattern {
             (0..3).for_each(|k| at[k] += size[k]);
         }
         starts.push(at);
-        let (mut row_idx, mut block_rows) = (Vec::new(), Vec::new());
-        let (mut incidences, mut slots) = (Vec::new(), Vec::new());
-        crate::resize_with_room(&mut row_idx, 9 * at[0], 0);
+        let (mut block_rows, mut incidences, mut slots) = (Vec::new(), Vec::new(), Vec::new());
         crate::resize_with_room(&mut block_rows, at[0], 0);
         crate::resize_with_room(&mut incidences, at[1], UNSET);
         crate::resize_with_room(&mut slots, at[2], 0);
@@ -636,38 +594,35 @@ impl SparsePattern {
         let lengths = |k: usize, unit: usize| -> Vec<usize> {
             ranges.iter().map(|r| unit * (starts[r.end][k] - starts[r.start][k])).collect()
         };
-        let (row_parts, block_parts) =
-            (crate::stretches(&mut row_idx, lengths(0, 9)), crate::stretches(&mut block_rows, lengths(0, 1)));
+        let block_parts = crate::stretches(&mut block_rows, lengths(0, 1));
         let (inc_parts, slot_parts) =
             (crate::stretches(&mut incidences, lengths(1, 1)), crate::stretches(&mut slots, lengths(2, 1)));
-        let runs: Vec<_> = (ranges.iter().cloned().zip(row_parts).zip(block_parts).zip(inc_parts).zip(slot_parts))
-            .map(|((((range, r), b), i), s)| (range, r, b, i, s))
+        let runs: Vec<_> = (ranges.iter().cloned().zip(block_parts).zip(inc_parts).zip(slot_parts))
+            .map(|(((range, b), i), s)| (range, b, i, s))
             .collect();
         let diagonal: Vec<Vec<u32>> = runs
             .into_par_iter()
-            .map(|(range, row_out, block_out, inc_out, slot_out)| {
+            .map(|(range, block_out, inc_out, slot_out)| {
                 let base = starts[range.start];
                 range
                     .map(|j| {
                         let [b, i, s] = std::array::from_fn(|k| starts[j][k] - base[k]);
                         let [bs, is, ss] = sizes(&columns[j]);
-                        let (row_out, block_out) = (&mut row_out[9 * b..9 * (b + bs)], &mut block_out[b..b + bs]);
+                        let block_out = &mut block_out[b..b + bs];
                         let (inc_out, slot_out) = (&mut inc_out[i..i + is], &mut slot_out[s..s + ss]);
-                        columns[j].write(j, blocks_of, row_out, block_out, inc_out, slot_out)
+                        columns[j].write(j, blocks_of, block_out, inc_out, slot_out)
                     })
                     .collect()
             })
             .collect();
         let diagonal: Vec<u32> = diagonal.into_iter().flatten().collect();
         let col_stride: Vec<usize> = columns.iter().map(|c| 3 * c.rows.len()).collect();
-        let n = 3 * num_blocks;
-        let values: Vec<usize> = starts.iter().map(|s| 9 * s[0]).collect();
-        let symbolic = checked_columns(n, column_pointers(&values, &col_stride), row_idx);
-        let blocks = block_structure(&symbolic, block_rows);
+        let row_starts: Vec<usize> = starts.iter().map(|s| s[0]).collect();
+        let blocks = block_structure(&row_starts, block_rows);
         SparsePattern {
             num_blocks,
-            symbolic,
             blocks,
+            scalar: OnceLock::new(),
             col_stride,
             offsets: narrow(starts.iter().map(|s| s[1])),
             slot_offsets: narrow(starts.iter().map(|s| s[2])),
@@ -682,9 +637,27 @@ impl SparsePattern {
         &self.blocks
     }
 
+    /// The scalar compressed-column structure (`3 num_blocks` square, both
+    /// triangles), made from the blocks on the first call after a change.
+    pub fn symbolic(&self) -> SymbolicSparseColMatRef<'_, usize> {
+        self.system().scalar()
+    }
+
+    /// Whether the scalar structure is made (since the last change): a
+    /// solver that works on blocks never asks for it.
+    pub fn holds_scalar(&self) -> bool {
+        self.scalar.get().is_some()
+    }
+
+    /// The pattern as a solver takes it (the scalar structure made only if
+    /// the solver asks for it).
+    pub fn system(&self) -> SystemPattern<'_> {
+        SystemPattern::new(&self.blocks, &self.scalar)
+    }
+
     /// Number of stored scalar entries.
     pub fn nnz(&self) -> usize {
-        self.symbolic.row_idx().len()
+        self.blocks.values_len()
     }
 
     /// Value index of the diagonal entry of scalar unknown `d`.
@@ -695,16 +668,15 @@ impl SparsePattern {
     /// Value index of scalar entry `(3 j + r, 3 j + c)` of the diagonal block
     /// of node `j`.
     pub fn block_slot(&self, j: usize, r: usize, c: usize) -> usize {
-        self.symbolic.col_ptr()[3 * j] + self.diagonal[j] as usize + c * self.col_stride[j] + r
+        self.blocks.start(j) + self.diagonal[j] as usize + c * self.col_stride[j] + r
     }
 
     /// Value index of entry `(3 i, 3 j)` of block `(i, j)`, if the pattern
     /// holds that block: entry `(3 i + r, 3 j + c)` is at `base + c stride
     /// + r` with [`SparsePattern::column_stride`]`(j)`.
     pub fn block_offset(&self, i: usize, j: usize) -> Option<usize> {
-        let cp = self.symbolic.col_ptr();
-        let rows = &self.symbolic.row_idx()[cp[3 * j]..cp[3 * j + 1]];
-        rows.binary_search(&(3 * i)).ok().map(|p| cp[3 * j] + p)
+        let rows = self.blocks.column_rows(j);
+        rows.binary_search(&(i as u32)).ok().map(|p| self.blocks.start(j) + 3 * p)
     }
 
     /// The offset between consecutive scalar columns of block column `j`.
@@ -714,7 +686,7 @@ impl SparsePattern {
 
     /// A matrix view of `values` on this pattern.
     pub fn matrix<'a>(&'a self, values: &'a [f64]) -> SparseColMatRef<'a, usize, f64> {
-        SparseColMatRef::new(self.symbolic.as_ref(), values)
+        SparseColMatRef::new(self.symbolic(), values)
     }
 
     /// Writes the global matrix into `values` (every entry is overwritten).
@@ -758,12 +730,11 @@ impl SparsePattern {
     {
         assert_eq!(values.len(), self.nnz());
         let shared = SharedValues(values.as_mut_ptr());
-        let col_ptr = self.symbolic.col_ptr();
         // one column of blocks per task, on the stack (no allocation)
         let column = || [[0.0f64; 9]; MAX_ENTRY_BLOCKS];
         (0..self.num_blocks).into_par_iter().with_min_len(64).for_each_init(column, |scratch, j| {
             let values = shared.get();
-            let (stride, base) = (self.col_stride[j], col_ptr[3 * j]);
+            let (stride, base) = (self.col_stride[j], self.blocks.start(j));
             // SAFETY (every write below): entries of columns 3j..3j+3
             // belong to this node task only, and lie in `values`
             for p in base..base + 3 * stride {

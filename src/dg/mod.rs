@@ -378,7 +378,7 @@ impl DgElements {
             return Ok(());
         }
         let mut cholesky = Cholesky::default();
-        cholesky.analyze(pattern.symbolic.as_ref())?;
+        cholesky.analyze(pattern.symbolic())?;
         let mut values = vec![0.0; pattern.nnz()];
         for _ in 0..MAX_DOUBLINGS {
             pattern.assemble(&mut values, |g, i, b, out| self.rest_stiffness_column(g, i, b, out));

@@ -55,12 +55,11 @@ impl Simulation {
             self.statics.get_or_insert_with(|| StaticSystem::new(p.solver, rhs.len(), p.tolerance, p.max_iterations));
         let stats = self.timings.time(Phase::Solve, || -> Result<SolveStats, SolveError> {
             if !statics.analysed {
-                statics.solver.analyze_blocks(pattern.symbolic.as_ref(), pattern.blocks())?;
+                statics.solver.analyze_pattern(pattern.system())?;
                 statics.analysed = true;
             }
-            let matrix = pattern.matrix(values);
-            statics.solver.factor(matrix)?;
-            let stats = statics.solver.solve(matrix, &rhs, &mut x)?;
+            statics.solver.factor_values(pattern.system(), values)?;
+            let stats = statics.solver.solve_values(pattern.system(), values, &rhs, &mut x)?;
             if x.iter().any(|v| !v.is_finite()) {
                 return Err(SolveError::NonFinite);
             }

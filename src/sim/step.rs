@@ -126,7 +126,7 @@ impl StepSystem {
     /// [`Phase::Solve`] by the caller).
     pub fn ensure_analysed(&mut self, pattern: &SparsePattern) -> Result<(), SolveError> {
         if !self.analysed {
-            self.solver.analyze_blocks(pattern.symbolic.as_ref(), pattern.blocks())?;
+            self.solver.analyze_pattern(pattern.system())?;
             self.analysed = true;
         }
         Ok(())
@@ -376,9 +376,9 @@ fn solve(
     if nodal {
         system.solver.set_positions(&state.position);
     }
-    let matrix = pattern.matrix(&system.values);
-    system.solver.factor(matrix)?;
-    let stats = system.solver.solve(matrix, &system.rhs, &mut system.velocity)?;
+    let values = &system.values;
+    system.solver.factor_values(pattern.system(), values)?;
+    let stats = system.solver.solve_values(pattern.system(), values, &system.rhs, &mut system.velocity)?;
     if system.velocity.iter().any(|v| !v.is_finite()) {
         return Err(SolveError::NonFinite);
     }

@@ -44,13 +44,13 @@
 use std::ops::Range;
 
 use cleave_kernels::spmv::{block_products, block_products_of_vectors, BlockColumns, Value, VECTORS};
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat, SymbolicSparseColMatRef};
 use rayon::prelude::*;
 
 use super::coarse::{aggregate_limit, CoarseSpace, Correction};
 use super::history::{ProjectionSums, SolutionHistory};
 use super::ordering::{Along, Renumbering};
-use super::{Cholesky, LinearSolver, SolveError, SolveStats};
+use super::{Cholesky, LinearSolver, SolveError, SolveStats, SystemPattern};
 
 /// Chunk length of the deterministic reductions.
 const CHUNK: usize = 4096;
@@ -372,8 +372,39 @@ impl BlockStructure {
         self.rows
     }
 
+    /// The first value of block column `j`.
+    #[inline]
+    pub fn start(&self, j: usize) -> usize {
+        self.start[j]
+    }
+
+    /// The scalar compressed columns of the structure (the inverse of
+    /// [`BlockStructure::new`]): block column `j`'s three scalar columns
+    /// each hold the scalar rows `3 r, 3 r + 1, 3 r + 2` of its block rows
+    /// `r`, one after another from value `start[j]` on.
+    pub fn scalar(&self) -> SymbolicSparseColMat<usize> {
+        let n = 3 * self.len();
+        let stride = |j: usize| 3 * self.column_rows(j).len();
+        let col_ptr: Vec<usize> =
+            (0..n).map(|c| self.start[c / 3] + (c % 3) * stride(c / 3)).chain([self.values_len()]).collect();
+        let mut row_idx = vec![0usize; self.values_len()];
+        let lengths = (0..self.len()).map(|j| 3 * stride(j));
+        crate::stretches(&mut row_idx, lengths).into_par_iter().enumerate().with_min_len(64).for_each(|(j, out)| {
+            let third = stride(j);
+            for (o, &r) in out[..third].chunks_exact_mut(3).zip(self.column_rows(j)) {
+                o.copy_from_slice(&[3 * r as usize, 3 * r as usize + 1, 3 * r as usize + 2]);
+            }
+            out.copy_within(..third, third);
+            out.copy_within(..third, 2 * third);
+        });
+        // SAFETY: the columns follow one another from 0 to the end of the
+        // rows (`start`, checked when the structure was made), and each
+        // holds its block rows' scalar rows, ascending and below `n`
+        unsafe { SymbolicSparseColMat::new_unchecked(n, n, col_ptr, None, row_idx) }
+    }
+
     /// Number of values the structure lays out.
-    fn values_len(&self) -> usize {
+    pub fn values_len(&self) -> usize {
         self.start.last().map_or(0, |&s| s + 9 * self.column_rows(self.len() - 1).len())
     }
 
@@ -1066,21 +1097,12 @@ fn invert3(m: [f64; 9]) -> [f64; 9] {
     }
 }
 
-impl LinearSolver for ConjugateGradient {
-    fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError> {
-        let blocks = BlockStructure::new(pattern)?;
-        self.analyze_blocks(pattern, &blocks)
-    }
-
-    fn analyze_blocks(
-        &mut self,
-        pattern: SymbolicSparseColMatRef<'_, usize>,
-        blocks: &BlockStructure,
-    ) -> Result<(), SolveError> {
-        let n = pattern.nrows();
-        if 3 * blocks.len() != n || blocks.values_len() != pattern.row_idx().len() {
-            return Err(SolveError::Analysis("the block structure is not the pattern's".into()));
-        }
+impl ConjugateGradient {
+    /// The analysis of a pattern whose 3x3 block structure is `blocks`:
+    /// the solver's numbering of the blocks, the coarse level's aggregates,
+    /// and the arrays of the iteration, sized.
+    fn analyze_structure(&mut self, blocks: &BlockStructure) -> Result<(), SolveError> {
+        let n = 3 * blocks.len();
         // (the arrays of the previous topology's analysis are reused: a
         // solver renewed by a cut writes into pages it already has)
         self.numbering.renew(blocks);
@@ -1094,7 +1116,7 @@ impl LinearSolver for ConjugateGradient {
         crate::resize_with_room(&mut self.inverse_blocks, n / 3, [0.0; 6]);
         // (the rotated rest-state factor replaces block Jacobi and its
         // coarse level, and takes the new reference before a solve)
-        let limit = aggregate_limit(pattern.row_idx().len());
+        let limit = aggregate_limit(blocks.values_len());
         let old = self.coarse.take().unwrap_or_default();
         self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, CHUNK_BLOCKS, old));
         self.coarse_age = CoarseAge::default();
@@ -1104,7 +1126,7 @@ impl LinearSolver for ConjugateGradient {
         }
         // (every entry is written before it is read in a solve; the arrays
         // keep room for the next cuts, [`crate::reserve_room`])
-        crate::resize_with_room(&mut self.values32, pattern.row_idx().len(), 0.0);
+        crate::resize_with_room(&mut self.values32, blocks.values_len(), 0.0);
         self.values.clear();
         for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.x_given] {
             crate::resize_with_room(v, n, 0.0);
@@ -1116,16 +1138,77 @@ impl LinearSolver for ConjugateGradient {
         Ok(())
     }
 
+    /// Takes note of new `values` (see [`LinearSolver::factor`]).
+    fn take_values(&mut self, values: &[f64]) -> Result<(), SolveError> {
+        if values.len() != self.values32.len() {
+            return Err(SolveError::NotReady);
+        }
+        self.pending = true;
+        Ok(())
+    }
+
+    /// Solves with the matrix of `values` (see [`LinearSolver::solve`]).
+    fn solve_with(&mut self, values: &[f64], b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError> {
+        if b.iter().chain(x.iter()).any(|v| !v.is_finite()) {
+            return Err(SolveError::NonFinite);
+        }
+        let n = self.b.len();
+        if values.len() != self.values32.len() || b.len() != n || x.len() != n {
+            return Err(SolveError::NotReady);
+        }
+        let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
+        self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
+        self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
+        let stats = self.solve_own((values, b), &b_own, &mut x_own);
+        self.coarse_age.solved(stats.as_ref().ok().map(|s| s.iterations));
+        self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
+        (self.b, self.x) = (b_own, x_own);
+        stats
+    }
+}
+
+impl LinearSolver for ConjugateGradient {
+    fn analyze(&mut self, pattern: SymbolicSparseColMatRef<'_, usize>) -> Result<(), SolveError> {
+        let blocks = BlockStructure::new(pattern)?;
+        self.analyze_blocks(pattern, &blocks)
+    }
+
+    fn analyze_blocks(
+        &mut self,
+        pattern: SymbolicSparseColMatRef<'_, usize>,
+        blocks: &BlockStructure,
+    ) -> Result<(), SolveError> {
+        if 3 * blocks.len() != pattern.nrows() || blocks.values_len() != pattern.row_idx().len() {
+            return Err(SolveError::Analysis("the block structure is not the pattern's".into()));
+        }
+        self.analyze_structure(blocks)
+    }
+
+    /// The iteration reads the block structure alone, never the scalar rows.
+    fn analyze_pattern(&mut self, pattern: SystemPattern<'_>) -> Result<(), SolveError> {
+        self.analyze_structure(pattern.blocks())
+    }
+
+    fn factor_values(&mut self, _pattern: SystemPattern<'_>, values: &[f64]) -> Result<(), SolveError> {
+        self.take_values(values)
+    }
+
+    fn solve_values(
+        &mut self,
+        _pattern: SystemPattern<'_>,
+        values: &[f64],
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<SolveStats, SolveError> {
+        self.solve_with(values, b, x)
+    }
+
     /// Takes note of new values: the next solve carries them into the
     /// solver's layout in the pass that takes its first residual (and the
     /// projection's products), and that solve reports a value that is not
     /// finite.
     fn factor(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
-        if matrix.parts().1.len() != self.values32.len() {
-            return Err(SolveError::NotReady);
-        }
-        self.pending = true;
-        Ok(())
+        self.take_values(matrix.parts().1)
     }
 
     /// Mixed precision: the iteration's products read the values rounded
@@ -1147,21 +1230,7 @@ impl LinearSolver for ConjugateGradient {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
-        if b.iter().chain(x.iter()).any(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite);
-        }
-        let n = self.b.len();
-        if matrix.parts().1.len() != self.values32.len() || b.len() != n || x.len() != n {
-            return Err(SolveError::NotReady);
-        }
-        let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
-        self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
-        self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
-        let stats = self.solve_own((matrix.parts().1, b), &b_own, &mut x_own);
-        self.coarse_age.solved(stats.as_ref().ok().map(|s| s.iterations));
-        self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
-        (self.b, self.x) = (b_own, x_own);
-        stats
+        self.solve_with(matrix.parts().1, b, x)
     }
 
     fn set_reference(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {

@@ -310,7 +310,7 @@ pub(super) mod tests {
         let (pattern, values, b) = box_system(12);
         let solve = |par: Par| {
             let mut chol = Cholesky::new(par);
-            chol.analyze(pattern.symbolic.as_ref()).unwrap();
+            chol.analyze(pattern.symbolic()).unwrap();
             let mut x = vec![0.0; b.len()];
             chol.factor(pattern.matrix(&values)).unwrap();
             chol.solve(pattern.matrix(&values), &b, &mut x).unwrap();
@@ -331,7 +331,7 @@ pub(super) mod tests {
     fn tree_solve_agrees_with_the_sequential_solve_on_any_pool() {
         let (pattern, values, b) = box_system(12);
         let mut chol = Cholesky::new(Par::Seq);
-        chol.analyze(pattern.symbolic.as_ref()).unwrap();
+        chol.analyze(pattern.symbolic()).unwrap();
         chol.factor(pattern.matrix(&values)).unwrap();
         chol.tree = partition(&chol);
         let (tasks, top) = chol.tree.as_ref().expect("a supernodal factor").shape();
@@ -366,7 +366,7 @@ pub(super) mod tests {
         let (small, small_values, small_b) = box_system(2);
         // the two matrices side by side, the small one's unknowns after
         let (nb, ns) = (big_b.len(), small_b.len());
-        let (bs, ss) = (big.symbolic.as_ref(), small.symbolic.as_ref());
+        let (bs, ss) = (big.symbolic(), small.symbolic());
         let mut col_ptr = bs.col_ptr().to_vec();
         let mut row_idx = bs.row_idx().to_vec();
         col_ptr.extend(ss.col_ptr()[1..].iter().map(|p| p + row_idx.len()));

@@ -199,7 +199,7 @@ mod tests {
     /// `A x = b` solved by a fresh factor of `values`.
     fn direct(pattern: &crate::assembly::SparsePattern, values: &[f64], b: &[f64]) -> Vec<f64> {
         let mut chol = Cholesky::default();
-        chol.analyze(pattern.symbolic.as_ref()).unwrap();
+        chol.analyze(pattern.symbolic()).unwrap();
         chol.factor(pattern.matrix(values)).unwrap();
         let mut x = vec![0.0; b.len()];
         chol.solve(pattern.matrix(values), b, &mut x).unwrap();
@@ -240,7 +240,7 @@ mod tests {
     fn a_drifted_matrix_is_solved_on_the_old_factor() {
         let (pattern, first, next, b) = drifted(8);
         let mut solver = LaggedCholesky::default();
-        solver.analyze(pattern.symbolic.as_ref()).unwrap();
+        solver.analyze(pattern.symbolic()).unwrap();
         let mut x = vec![0.0; b.len()];
         solver.factor(pattern.matrix(&first)).unwrap();
         let stats = solver.solve(pattern.matrix(&first), &b, &mut x).unwrap();
@@ -268,7 +268,7 @@ mod tests {
             values
         };
         let mut solver = LaggedCholesky::default();
-        solver.analyze(pattern.symbolic.as_ref()).unwrap();
+        solver.analyze(pattern.symbolic()).unwrap();
         let mut x = vec![0.0; b.len()];
         solver.factor(pattern.matrix(&first)).unwrap();
         solver.solve(pattern.matrix(&first), &b, &mut x).unwrap();
@@ -288,7 +288,7 @@ mod tests {
         let (pattern, first, next, b) = drifted(10);
         let solve = || {
             let mut solver = LaggedCholesky::default();
-            solver.analyze(pattern.symbolic.as_ref()).unwrap();
+            solver.analyze(pattern.symbolic()).unwrap();
             let mut x = vec![0.0; b.len()];
             let mut bits = Vec::new();
             for values in [&first, &next] {

@@ -305,7 +305,7 @@ fn pipeline_on(mesh: &PolyMesh, label: &str, material: &Material) -> Result<Vec<
         best_ms(5, || pattern.assemble(&mut values, |b, i, c, out| store.batches[b].block_column(i, c, out)));
     push("assembly", ms, None);
     let mut chol = Cholesky::default();
-    let (ms, r) = best_ms(1, || chol.analyze(pattern.symbolic.as_ref()));
+    let (ms, r) = best_ms(1, || chol.analyze(pattern.symbolic()));
     r?;
     // nnz(L) as CHOLMOD counts it (on and below the diagonal)
     push("cholesky symbolic", ms, Some(("nnz(L)".into(), chol.factor_nnz() as f64)));
@@ -318,7 +318,7 @@ fn pipeline_on(mesh: &PolyMesh, label: &str, material: &Material) -> Result<Vec<
     // the flop rate, to compare with the machine's dense peak
     push("cholesky numeric", ms, Some(("GFLOP/s".into(), chol.factor_flops() / (ms * 1e6))));
     let mut sequential = Cholesky::new(faer::Par::Seq);
-    sequential.analyze(pattern.symbolic.as_ref())?;
+    sequential.analyze(pattern.symbolic())?;
     let (ms_sequential, r) = best_ms(2, || sequential.factor(pattern.matrix(&values)));
     r?;
     push("cholesky numeric (sequential)", ms_sequential, Some(("sequential / default".into(), ms_sequential / ms)));

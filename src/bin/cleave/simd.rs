@@ -241,7 +241,7 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
         &cleave::store::BasisOptions::default(),
     )?;
     let pattern = cleave::assembly::SparsePattern::build(mesh.nodes.len(), &store);
-    let blocks = cleave::solve::BlockStructure::new(pattern.symbolic.as_ref())
+    let blocks = cleave::solve::BlockStructure::new(pattern.symbolic())
         .map_err(|e| Error::Internal(format!("the box's pattern: {e}")))?;
     let values: Vec<f32> = (0..pattern.nnz()).map(|i| noise(i) as f32).collect();
     let x: Vec<f64> = (0..3 * pattern.num_blocks).map(|i| noise(i + 1)).collect();
