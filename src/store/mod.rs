@@ -275,19 +275,25 @@ impl Batch {
         triangles: usize,
         quadrature: usize,
     ) {
+        // (with room to spare, [`crate::reserve_room`]: the first cut would
+        // otherwise copy the whole batch of a mesh's tetrahedra to grow it)
+        use crate::{reserve_room, resize_with_room};
         let (k, n) = (self.k, self.len() + elements.len());
+        reserve_room(&mut self.elements, n);
         self.elements.extend_from_slice(elements);
         let start = self.nodes.len();
+        reserve_room(&mut self.nodes, n * k);
         self.nodes.extend(elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()));
+        reserve_room(&mut self.rest, n * k);
         self.rest.extend(self.nodes[start..].iter().map(|&v| mesh.nodes[v as usize]));
-        self.volume.resize(n, 0.0);
-        self.mass_fraction.resize(n * k, 0.0);
-        self.stiffness.resize(n * stiffness, 0.0);
-        self.stress_grads.resize(n * k, [0.0; 3]);
-        self.triangles.resize(n * triangles, [0; 3]);
-        self.points.resize(n * quadrature, [0.0; 3]);
-        self.weights.resize(n * quadrature, 0.0);
-        self.stiffness_ratio.resize(n, 0.0);
+        resize_with_room(&mut self.volume, n, 0.0);
+        resize_with_room(&mut self.mass_fraction, n * k, 0.0);
+        resize_with_room(&mut self.stiffness, n * stiffness, 0.0);
+        resize_with_room(&mut self.stress_grads, n * k, [0.0; 3]);
+        resize_with_room(&mut self.triangles, n * triangles, [0; 3]);
+        resize_with_room(&mut self.points, n * quadrature, [0.0; 3]);
+        resize_with_room(&mut self.weights, n * quadrature, 0.0);
+        resize_with_room(&mut self.stiffness_ratio, n, 0.0);
     }
 
     /// Removes entry `i`; the last entry takes its place.
