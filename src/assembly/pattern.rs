@@ -90,7 +90,16 @@ struct Stored<Columns, Incidences, Numbers> {
 
 impl serde::Serialize for SparsePattern {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        let symbolic = self.symbolic();
+        // (made for the checkpoint alone where no solver asked for it: a
+        // body solved by CG keeps not holding it)
+        let made;
+        let symbolic = match self.scalar.get() {
+            Some(scalar) => scalar.as_ref(),
+            None => {
+                made = self.blocks.scalar();
+                made.as_ref()
+            }
+        };
         Stored {
             num_blocks: self.num_blocks,
             col_ptr: symbolic.col_ptr(),
