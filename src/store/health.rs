@@ -155,7 +155,7 @@ fn spectra(batches: &[Batch], first: &[usize]) -> Vec<Vec<Spectrum>> {
         .zip(first)
         .enumerate()
         .flat_map(|(b, (batch, &from))| {
-            let run = if batch.kind == ElementKind::LinearTet { TET_RUN } else { SPECTRUM_RUN };
+            let run = if batch.is_tet() { TET_RUN } else { SPECTRUM_RUN };
             (from..batch.len()).step_by(run).map(move |start| (b, start..(start + run).min(batch.len())))
         })
         .collect();
@@ -166,7 +166,7 @@ fn spectra(batches: &[Batch], first: &[usize]) -> Vec<Vec<Spectrum>> {
             let (k, n) = (batch.k, 3 * batch.k);
             let mut out = vec![Spectrum::default(); range.len()];
             let x = &batch.rest[range.start * k..range.end * k];
-            if batch.kind == ElementKind::LinearTet {
+            if batch.is_tet() {
                 // the nonzero spectrum of a 6 x 6 matrix
                 let (g, volume) = (&batch.stress_grads[range.start * 4..range.end * 4], &batch.volume[range.clone()]);
                 tet_spectra(x, g, volume, batch.lame.0, batch.lame.1, &mut out);

@@ -325,9 +325,11 @@ impl Batch {
         self.mass_fraction[i * self.k + a] * self.volume[i] * density
     }
 
-    /// Whether the batch holds closed-form linear tetrahedra.
+    /// Whether the batch holds closed-form linear tetrahedra (no stored
+    /// `K_e`: their blocks come from their gradients).
+    #[inline]
     pub fn is_tet(&self) -> bool {
-        self.stiffness.is_empty()
+        self.kind == ElementKind::LinearTet
     }
 
     /// The row-major 3x3 block `K_ab` (N/m) of entry `i`: for tetrahedra
