@@ -71,35 +71,57 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
 /// [`face_geometry`] of the loop of the `n` points `point(0)`, ...,
 /// `point(n - 1)`.
 pub fn loop_geometry(n: usize, point: impl Fn(usize) -> [f64; 3]) -> FaceGeometry {
-    let p = |i: usize| point(i % n);
-    let mean = scale((0..n).fold([0.0; 3], |acc, i| add(acc, p(i))), 1.0 / n as f64);
+    let LoopPlane { normal, area, centroid } = loop_plane(n, &point);
+    let mut max_deviation: f64 = 0.0;
+    let mut d2: f64 = 0.0;
+    for i in 0..n {
+        let a = point(i);
+        max_deviation = max_deviation.max(dot(sub(a, centroid), normal).abs());
+        for j in i + 1..n {
+            let d = sub(a, point(j));
+            d2 = d2.max(dot(d, d));
+        }
+    }
+    FaceGeometry { normal, area, centroid, max_deviation, diameter: d2.sqrt() }
+}
+
+/// The plane of a face loop: the part of [`FaceGeometry`] that the
+/// geometry of a polyhedron needs (its faces' planes and areas), without
+/// the planarity and the diameter (a pass over every pair of points).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopPlane {
+    /// Unit normal by Newell's method (right-hand rule along the loop).
+    pub normal: [f64; 3],
+    /// Area of the loop projected on its normal plane (m^2).
+    pub area: f64,
+    /// Area centroid of the loop (m).
+    pub centroid: [f64; 3],
+}
+
+/// The [`LoopPlane`] of the loop of the `n` points `point(0)`, ...,
+/// `point(n - 1)`: the same bits as [`loop_geometry`]'s.
+pub fn loop_plane(n: usize, point: impl Fn(usize) -> [f64; 3]) -> LoopPlane {
+    // (point `i` and its successor, without a division per access)
+    let edge = |i: usize| (point(i), point(if i + 1 == n { 0 } else { i + 1 }));
+    let mean = scale((0..n).fold([0.0; 3], |acc, i| add(acc, point(i))), 1.0 / n as f64);
     let mut area_vec = [0.0; 3];
     let mut c = [0.0; 3];
     let mut wsum = 0.0;
     for i in 0..n {
-        let (a, b) = (sub(p(i), mean), sub(p(i + 1), mean));
-        let t = cross(a, b);
+        let (a, b) = edge(i);
+        let t = cross(sub(a, mean), sub(b, mean));
         area_vec = add(area_vec, t);
     }
     let len = norm(area_vec);
     let normal = if len > 0.0 { scale(area_vec, 1.0 / len) } else { [0.0; 3] };
     for i in 0..n {
-        let (a, b) = (p(i), p(i + 1));
+        let (a, b) = edge(i);
         let w = dot(cross(sub(a, mean), sub(b, mean)), normal);
         wsum += w;
         c = add(c, scale(add(add(a, b), mean), w / 3.0));
     }
     let centroid = if wsum.abs() > 0.0 { scale(c, 1.0 / wsum) } else { mean };
-    let mut max_deviation: f64 = 0.0;
-    let mut d2: f64 = 0.0;
-    for i in 0..n {
-        max_deviation = max_deviation.max(dot(sub(p(i), centroid), normal).abs());
-        for j in i + 1..n {
-            let d = sub(p(i), p(j));
-            d2 = d2.max(dot(d, d));
-        }
-    }
-    FaceGeometry { normal, area: 0.5 * len, centroid, max_deviation, diameter: d2.sqrt() }
+    LoopPlane { normal, area: 0.5 * len, centroid }
 }
 
 /// Closed face loops of keyed points (a key names a point: two loops share
@@ -118,7 +140,7 @@ pub fn fold_depth<K: Copy + Ord>(loops: &Loops<K>) -> f64 {
     let planes: SmallVec<[([f64; 3], [f64; 3]); 16]> = loops
         .iter()
         .map(|lp| {
-            let g = loop_geometry(lp.len(), |i| lp[i].1);
+            let g = loop_plane(lp.len(), |i| lp[i].1);
             (g.centroid, g.normal)
         })
         .collect();

@@ -296,12 +296,14 @@ impl Renumbering {
                     at += column.len();
                     continue;
                 }
-                // (a column's rows are distinct: an unstable sort is exact)
-                let mut pairs: smallvec::SmallVec<[(u32, u32); 64]> =
-                    renumbered.iter().enumerate().map(|(q, &r)| (r, q as u32)).collect();
+                // (a column's rows are distinct: an unstable sort is exact;
+                // a row and its place packed into one integer, row first,
+                // sort as the pairs would, with one comparison each)
+                let mut pairs: smallvec::SmallVec<[u64; 64]> =
+                    renumbered.iter().enumerate().map(|(q, &r)| (u64::from(r) << 32) | q as u64).collect();
                 pairs.sort_unstable();
-                for (k, (r, q)) in pairs.into_iter().enumerate() {
-                    (rows[at + k], source[at + k]) = (r, q);
+                for (k, pair) in pairs.into_iter().enumerate() {
+                    (rows[at + k], source[at + k]) = ((pair >> 32) as u32, pair as u32);
                 }
                 at += column.len();
             }

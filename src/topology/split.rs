@@ -40,8 +40,8 @@ use thiserror::Error;
 
 use super::CutScope;
 use crate::mesh::{
-    diameter, diameter_of, fold_depth, loop_geometry, quality, ElementFaces, ElementNodes, Face, FaceLoop, FaceRef,
-    Loops, Plane, PolyMesh,
+    diameter, diameter_of, fold_depth, loop_plane, quality, ElementFaces, ElementNodes, Face, FaceLoop, FaceRef, Loops,
+    Plane, PolyMesh,
 };
 
 /// Tolerances of a split.
@@ -491,16 +491,21 @@ fn split_is_healthy(
         // and no face may be a sliver of no area (a clipped loop whose
         // points snapping left on one line)
         let star = part.iter().all(|lp| {
-            let g = loop_geometry(lp.len(), |i| lp[i].1);
+            let g = loop_plane(lp.len(), |i| lp[i].1);
             dot(sub(centroid, g.centroid), g.normal) < 0.0 && g.area > MIN_FACE_AREA * d * d
         });
-        let spacing = (0..points.len())
-            .flat_map(|i| (i + 1..points.len()).map(move |j| (i, j)))
-            .map(|(i, j)| norm(sub(points[i].1, points[j].1)))
-            .fold(f64::INFINITY, f64::min);
+        // (the closest pair's distance: one square root, of the smallest
+        // square, which is the smallest of the pairs' distances, bit for bit)
+        let spacing = || {
+            let squares = (0..points.len()).flat_map(|i| (i + 1..points.len()).map(move |j| (i, j))).map(|(i, j)| {
+                let d = sub(points[i].1, points[j].1);
+                dot(d, d)
+            });
+            squares.fold(f64::INFINITY, f64::min).sqrt()
+        };
         star && quality(volume, d) >= opts.min_quality
             && d >= opts.min_diameter
-            && spacing >= opts.min_spacing * d
+            && spacing() >= opts.min_spacing * d
             && fold_depth(part) <= opts.max_fold() * d
     })
 }
