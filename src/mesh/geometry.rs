@@ -136,16 +136,19 @@ pub type Loops<K> = super::lists::Lists<(K, [f64; 3])>;
 /// loops run counter-clockwise seen from outside. Negative for a strictly
 /// convex surface.
 pub fn fold_depth<K: Copy + Ord>(loops: &Loops<K>) -> f64 {
-    // (on the stack for the elements cuts make: thousands per cut)
-    let planes: SmallVec<[([f64; 3], [f64; 3]); 16]> = loops
-        .iter()
-        .map(|lp| {
-            let g = loop_plane(lp.len(), |i| lp[i].1);
-            (g.centroid, g.normal)
-        })
-        .collect();
+    fold_depth_on(loops, &loop_planes(loops))
+}
+
+/// The [`LoopPlane`] of every loop of `loops`, in order (on the stack for
+/// the elements cuts make: thousands per cut).
+pub fn loop_planes<K: Copy>(loops: &Loops<K>) -> SmallVec<[LoopPlane; 16]> {
+    loops.iter().map(|lp| loop_plane(lp.len(), |i| lp[i].1)).collect()
+}
+
+/// [`fold_depth`] of `loops` whose planes, [`loop_planes`], are known.
+pub fn fold_depth_on<K: Copy + Ord>(loops: &Loops<K>, planes: &[LoopPlane]) -> f64 {
     let outside = |f: usize, g: usize| {
-        let (c, n) = planes[f];
+        let LoopPlane { centroid: c, normal: n, .. } = planes[f];
         loops.get(g).iter().map(|p| dot(sub(p.1, c), n)).fold(f64::NEG_INFINITY, f64::max)
     };
     // every loop's edges, sorted: a loop meets the first loop (in loop

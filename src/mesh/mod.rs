@@ -19,7 +19,10 @@ mod triangulate;
 mod validate;
 
 pub use adjacency::Adjacency;
-pub use geometry::{face_geometry, fold_depth, loop_geometry, loop_plane, FaceGeometry, LoopPlane, Loops, Plane};
+pub use geometry::{
+    face_geometry, fold_depth, fold_depth_on, loop_geometry, loop_plane, loop_planes, FaceGeometry, LoopPlane, Loops,
+    Plane,
+};
 pub use lists::Lists;
 pub use order::Renumbered;
 pub use triangulate::triangulate_loop;

@@ -40,8 +40,8 @@ use thiserror::Error;
 
 use super::CutScope;
 use crate::mesh::{
-    diameter, diameter_of, fold_depth, loop_plane, quality, ElementFaces, ElementNodes, Face, FaceLoop, FaceRef, Loops,
-    Plane, PolyMesh,
+    diameter, diameter_of, fold_depth_on, loop_planes, quality, ElementFaces, ElementNodes, Face, FaceLoop, FaceRef,
+    Loops, Plane, PolyMesh,
 };
 
 /// Tolerances of a split.
@@ -490,10 +490,10 @@ fn split_is_healthy(
         // centroid to its faces: every face must see the centroid inside;
         // and no face may be a sliver of no area (a clipped loop whose
         // points snapping left on one line)
-        let star = part.iter().all(|lp| {
-            let g = loop_plane(lp.len(), |i| lp[i].1);
-            dot(sub(centroid, g.centroid), g.normal) < 0.0 && g.area > MIN_FACE_AREA * d * d
-        });
+        // (the faces' planes serve the fold's depth below as well)
+        let planes = loop_planes(part);
+        let star =
+            planes.iter().all(|g| dot(sub(centroid, g.centroid), g.normal) < 0.0 && g.area > MIN_FACE_AREA * d * d);
         // (the closest pair's distance: one square root, of the smallest
         // square, which is the smallest of the pairs' distances, bit for bit)
         let spacing = || {
@@ -506,7 +506,7 @@ fn split_is_healthy(
         star && quality(volume, d) >= opts.min_quality
             && d >= opts.min_diameter
             && spacing() >= opts.min_spacing * d
-            && fold_depth(part) <= opts.max_fold() * d
+            && fold_depth_on(part, &planes) <= opts.max_fold() * d
     })
 }
 
