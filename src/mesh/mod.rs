@@ -20,8 +20,7 @@ mod validate;
 
 pub use adjacency::Adjacency;
 pub use geometry::{
-    face_geometry, fold_depth, fold_depth_on, loop_geometry, loop_plane, loop_planes, FaceGeometry, LoopPlane, Loops,
-    Plane,
+    face_geometry, fold_depth, fold_depth_on, loop_geometry, loop_planes, FaceGeometry, LoopPlane, Loops, Plane,
 };
 pub use lists::Lists;
 pub use order::Renumbered;
