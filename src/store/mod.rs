@@ -362,9 +362,14 @@ impl Batch {
         ke
     }
 
-    /// [`Batch::element_matrix`] into `ke` (`9 k^2` values).
+    /// [`Batch::element_matrix`] into `ke` (`9 k^2` values): the stored
+    /// `K_e` copied whole, or a tetrahedron's blocks from its gradients.
     pub fn element_matrix_into(&self, i: usize, ke: &mut [f64]) {
         let (k, n) = (self.k, 3 * self.k);
+        if !self.is_tet() {
+            ke.copy_from_slice(&self.stiffness[i * n * n..(i + 1) * n * n]);
+            return;
+        }
         for a in 0..k {
             for b in 0..k {
                 let blk = self.block(i, a, b);
