@@ -72,17 +72,8 @@ pub fn face_geometry(nodes: &[[f64; 3]], vertices: &[u32]) -> FaceGeometry {
 /// `point(n - 1)`.
 pub fn loop_geometry(n: usize, point: impl Fn(usize) -> [f64; 3]) -> FaceGeometry {
     let LoopPlane { normal, area, centroid } = loop_plane(n, &point);
-    let mut max_deviation: f64 = 0.0;
-    let mut d2: f64 = 0.0;
-    for i in 0..n {
-        let a = point(i);
-        max_deviation = max_deviation.max(dot(sub(a, centroid), normal).abs());
-        for j in i + 1..n {
-            let d = sub(a, point(j));
-            d2 = d2.max(dot(d, d));
-        }
-    }
-    FaceGeometry { normal, area, centroid, max_deviation, diameter: d2.sqrt() }
+    let max_deviation = (0..n).map(|i| dot(sub(point(i), centroid), normal).abs()).fold(0.0, f64::max);
+    FaceGeometry { normal, area, centroid, max_deviation, diameter: super::diameter_of(n, point) }
 }
 
 /// The plane of a face loop: the part of [`FaceGeometry`] that the

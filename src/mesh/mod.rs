@@ -192,15 +192,23 @@ pub(crate) fn diameter(points: &[[f64; 3]]) -> f64 {
 
 /// [`diameter`] of the `n` points `point(0..n)`, without gathering them.
 pub(crate) fn diameter_of(n: usize, point: impl Fn(usize) -> [f64; 3]) -> f64 {
-    let mut d2: f64 = 0.0;
-    for i in 0..n {
-        let a = point(i);
-        for j in i + 1..n {
-            let d = sub(a, point(j));
-            d2 = d2.max(cleave_kernels::vec3::dot(d, d));
-        }
-    }
-    d2.sqrt()
+    pair_squares(n, point).fold(0.0, f64::max).sqrt()
+}
+
+/// Smallest distance between two of the `n` points `point(0..n)` (m;
+/// infinite for fewer than two): one square root, of the smallest square,
+/// which is the smallest of the distances bit for bit.
+pub(crate) fn closest_of(n: usize, point: impl Fn(usize) -> [f64; 3]) -> f64 {
+    pair_squares(n, point).fold(f64::INFINITY, f64::min).sqrt()
+}
+
+/// The squared distance of every pair `i < j` of the `n` points
+/// `point(0..n)`, in the order of `i`, then `j`.
+fn pair_squares(n: usize, point: impl Fn(usize) -> [f64; 3]) -> impl Iterator<Item = f64> {
+    (0..n).flat_map(move |i| (i + 1..n).map(move |j| (i, j))).map(move |(i, j)| {
+        let d = sub(point(i), point(j));
+        cleave_kernels::vec3::dot(d, d)
+    })
 }
 
 /// Shape quality `ρ = 6√2 V / d³` of a cell of volume `V` and diameter
@@ -502,6 +510,18 @@ mod tests {
     pub(crate) fn unit_tet() -> PolyMesh {
         let nodes = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         PolyMesh::from_cells(nodes, &[Cell::Tet([0, 1, 2, 3])]).unwrap()
+    }
+
+    /// The farthest and the closest pair of a few points, and the limits
+    /// of fewer than two.
+    #[test]
+    fn diameter_and_closest_pair() {
+        let points = [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 4.0, 0.0], [0.0, 4.0, 0.0]];
+        let point = |i: usize| points[i];
+        assert_eq!(diameter_of(4, point), 5.0);
+        assert_eq!(closest_of(4, point), 3.0);
+        assert_eq!(diameter_of(1, point), 0.0);
+        assert_eq!(closest_of(1, point), f64::INFINITY);
     }
 
     #[test]

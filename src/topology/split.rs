@@ -40,8 +40,8 @@ use thiserror::Error;
 
 use super::CutScope;
 use crate::mesh::{
-    diameter, diameter_of, fold_depth_on, loop_planes, quality, ElementFaces, ElementNodes, Face, FaceLoop, FaceRef,
-    Loops, Plane, PolyMesh,
+    closest_of, diameter, diameter_of, fold_depth_on, loop_planes, quality, ElementFaces, ElementNodes, Face, FaceLoop,
+    FaceRef, Loops, Plane, PolyMesh,
 };
 
 /// Tolerances of a split.
@@ -494,15 +494,8 @@ fn split_is_healthy(
         let planes = loop_planes(part);
         let star =
             planes.iter().all(|g| dot(sub(centroid, g.centroid), g.normal) < 0.0 && g.area > MIN_FACE_AREA * d * d);
-        // (the closest pair's distance: one square root, of the smallest
-        // square, which is the smallest of the pairs' distances, bit for bit)
-        let spacing = || {
-            let squares = (0..points.len()).flat_map(|i| (i + 1..points.len()).map(move |j| (i, j))).map(|(i, j)| {
-                let d = sub(points[i].1, points[j].1);
-                dot(d, d)
-            });
-            squares.fold(f64::INFINITY, f64::min).sqrt()
-        };
+        // (the pair pass last: the cheaper tests settle most parts)
+        let spacing = || closest_of(points.len(), |i| points[i].1);
         star && quality(volume, d) >= opts.min_quality
             && d >= opts.min_diameter
             && spacing() >= opts.min_spacing * d
