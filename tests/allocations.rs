@@ -58,13 +58,18 @@ static ONE_TEST_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// A pool of two threads, marked, whose dense kernels have made their
 /// buffers (as a real-time host prepares its threads: see
-/// `cleave::solve::prepare_thread`).
+/// `cleave::solve::prepare_thread`), and started: a worker's first look
+/// for work registers it with the work-stealing queues' memory reclaimer
+/// (an allocation), which a thread still starting would make while
+/// another counts.
 fn marked_pool() -> rayon::ThreadPool {
     let start = |_| {
         cleave::solve::prepare_thread();
         MARKED.with(|m| m.set(true));
     };
-    rayon::ThreadPoolBuilder::new().num_threads(2).start_handler(start).build().unwrap()
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).start_handler(start).build().unwrap();
+    pool.broadcast(|_| ());
+    pool
 }
 
 /// Allocations made by `f` on the marked threads.
