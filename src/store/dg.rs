@@ -385,7 +385,6 @@ pub(super) fn build_batch(
         points: Vec::new(),
         weights: Vec::new(),
         points_per_element: 0,
-        stiffness_ratio: Vec::new(),
         dg: bases,
     };
     Ok((batch, integrated))

@@ -9,15 +9,18 @@
 //! node ends with a negligible mass: a node's mass is then at least that
 //! fraction of the mean nodal mass `ρ V_e / k_e` of its elements). The
 //! spectrum comes from [`cleave_kernels::spectrum`]: exact and closed form
-//! for tetrahedra, estimated by power and inverse iteration for the other
-//! elements, both one element per SIMD lane (`cleave bench --only simd`,
-//! AMD EPYC, AVX-512: 0.37 µs per tetrahedron, 4.3 µs per 24 x 24 `K_e`),
-//! so the check stays on. A failure is an error naming the element.
+//! for tetrahedra; for the other elements `λ_max` by power iteration and
+//! the floor on `λ₇` certified by a Cholesky factor (which exists exactly
+//! when `λ₇` reaches it), both one element per SIMD lane (`cleave bench
+//! --only simd`, AMD EPYC, AVX-512: 0.37 µs per tetrahedron; in a run of
+//! 32 hexahedra, 24 x 24 `K_e`, 2.7 µs each on an Intel Xeon, against 5.1
+//! µs for the estimate of `λ₇` by inverse iteration it replaced: `cargo
+//! bench --bench cut -- run_of_32`), so the check stays on. A failure is an error naming the element.
 
-use cleave_kernels::spectrum::{stiffness_spectra, tet_spectra, RigidModes, Spectrum};
+use cleave_kernels::spectrum::{stiffness_certificates, tet_spectra, Certificate};
 use rayon::prelude::*;
 
-use super::{BasisError, Batch, ElementKind};
+use super::{BasisError, Batch};
 
 /// Floors every built element must meet.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -61,59 +64,47 @@ impl HealthFloors {
     }
 }
 
-/// Computes `λ₇ / λ_max` of every entry of every batch `b` from entry
-/// `first[b]` on into its `stiffness_ratio` and checks those entries
-/// against `floors`; on failure, names, in the first batch with a failing
-/// entry, the failing entry with the smallest element id (so the error
-/// does not depend on the thread count).
-pub(super) fn check_all(batches: &mut [Batch], first: &[usize], floors: &HealthFloors) -> Result<(), BasisError> {
-    let verdicts = assess(batches, first, floors);
-    record(batches, first, verdicts)
+/// Checks every entry of every batch `b` from entry `first[b]` on against
+/// `floors`; on failure, names, in the first batch with a failing entry,
+/// the failing entry with the smallest element id (so the error does not
+/// depend on the thread count).
+pub(super) fn check_all(batches: &[Batch], first: &[usize], floors: &HealthFloors) -> Result<(), BasisError> {
+    first_failure(batches, first, assess(batches, first, floors))
 }
 
 /// The verdict on every entry of every batch `b` from entry `first[b]` on:
-/// its `λ₇ / λ_max`, or the first of `floors` it fails.
-pub(super) fn assess(batches: &[Batch], first: &[usize], floors: &HealthFloors) -> Vec<Vec<Result<f64, BasisError>>> {
-    let spectra = spectra(batches, first);
-    (batches.iter().zip(first).zip(spectra))
-        .map(|((batch, &from), spectra)| verdicts(batch, from, &spectra, floors))
+/// the first of `floors` it fails, if any.
+pub(super) fn assess(batches: &[Batch], first: &[usize], floors: &HealthFloors) -> Vec<Vec<Result<(), BasisError>>> {
+    let certificates = certificates(batches, first, floors.stiffness_ratio);
+    (batches.iter().zip(first).zip(certificates))
+        .map(|((batch, &from), certificates)| verdicts(batch, from, &certificates, floors))
         .collect()
 }
 
-/// Stores the ratios of `verdicts` (of [`assess`] from the same `first`, 0
-/// for a failed entry) in the batches and returns the error [`check_all`]
-/// names, if any.
-pub(super) fn record(
-    batches: &mut [Batch],
+/// The error [`check_all`] names for `verdicts` (of [`assess`] from the
+/// same `first`), if any.
+pub(super) fn first_failure(
+    batches: &[Batch],
     first: &[usize],
-    verdicts: Vec<Vec<Result<f64, BasisError>>>,
+    verdicts: Vec<Vec<Result<(), BasisError>>>,
 ) -> Result<(), BasisError> {
-    let mut first_failure: Option<BasisError> = None;
-    for ((batch, &from), verdicts) in batches.iter_mut().zip(first).zip(verdicts) {
-        let mut worst: Option<BasisError> = None;
-        batch.stiffness_ratio.resize(batch.len(), 0.0);
-        for (i, r) in verdicts.into_iter().enumerate() {
-            batch.stiffness_ratio[from + i] = match r {
-                Ok(ratio) => ratio,
-                Err(e) => {
-                    let first = worst.as_ref().is_none_or(|w| (batch.elements[from + i] as usize) < w.element());
-                    if first {
-                        worst = Some(e);
-                    }
-                    0.0
-                }
-            };
-        }
-        if first_failure.is_none() {
-            first_failure = worst;
+    for ((batch, &from), verdicts) in batches.iter().zip(first).zip(verdicts) {
+        let failures = verdicts.into_iter().enumerate().filter_map(|(i, r)| r.err().map(|e| (from + i, e)));
+        if let Some((_, e)) = failures.min_by_key(|(i, _)| batch.elements[*i]) {
+            return Err(e);
         }
     }
-    first_failure.map_or(Ok(()), Err)
+    Ok(())
 }
 
 /// The verdict on every entry of `batch` from entry `from` on, whose
-/// entries have the `spectra`.
-fn verdicts(batch: &Batch, from: usize, spectra: &[Spectrum], floors: &HealthFloors) -> Vec<Result<f64, BasisError>> {
+/// entries have the `certificates`.
+fn verdicts(
+    batch: &Batch,
+    from: usize,
+    certificates: &[Certificate],
+    floors: &HealthFloors,
+) -> Vec<Result<(), BasisError>> {
     let k = batch.k;
     (from..batch.len())
         .into_par_iter()
@@ -125,15 +116,16 @@ fn verdicts(batch: &Batch, from: usize, spectra: &[Spectrum], floors: &HealthFlo
                 let fraction = share[a] * k as f64;
                 return Err(BasisError::LightNode { element, node, fraction, floor: floors.mass_fraction });
             }
-            let s = spectra[i - from];
-            if !(s.rigid_residual <= floors.rigid_residual) {
-                return Err(BasisError::RigidModes { element, residual: s.rigid_residual });
+            let c = certificates[i - from];
+            if !(c.rigid_residual <= floors.rigid_residual) {
+                return Err(BasisError::RigidModes { element, residual: c.rigid_residual });
             }
-            let ratio = s.ratio();
-            if !(ratio >= floors.stiffness_ratio) {
+            if !c.stiff {
+                // (the estimate, for the message: a rare path)
+                let ratio = batch.stiffness_spectrum(i).ratio();
                 return Err(BasisError::SoftElement { element, ratio, floor: floors.stiffness_ratio });
             }
-            Ok(ratio)
+            Ok(())
         })
         .collect()
 }
@@ -144,12 +136,13 @@ fn verdicts(batch: &Batch, from: usize, spectra: &[Spectrum], floors: &HealthFlo
 const SPECTRUM_RUN: usize = 32;
 const TET_RUN: usize = 128;
 
-/// The spectrum of every entry of every batch `b` from entry `first[b]`
-/// on: closed form for tetrahedra, else estimated from its `K_e`, runs of
-/// entries side by side in SIMD lanes (each entry's estimate the same
-/// whichever run holds it), the runs of all batches in one parallel pass
-/// (a cut makes a dozen batches, most of a few elements).
-fn spectra(batches: &[Batch], first: &[usize]) -> Vec<Vec<Spectrum>> {
+/// Whether `λ₇ ≥ floor λ_max` for every entry of every batch `b` from
+/// entry `first[b]` on, with its `λ_max` and rigid residual: closed form
+/// for tetrahedra, else certified from its `K_e`, runs of entries side by
+/// side in SIMD lanes (each entry's certificate the same whichever run
+/// holds it), the runs of all batches in one parallel pass (a cut makes a
+/// dozen batches, most of a few elements).
+fn certificates(batches: &[Batch], first: &[usize], floor: f64) -> Vec<Vec<Certificate>> {
     let runs: Vec<(usize, std::ops::Range<usize>)> = batches
         .iter()
         .zip(first)
@@ -159,33 +152,37 @@ fn spectra(batches: &[Batch], first: &[usize]) -> Vec<Vec<Spectrum>> {
             (from..batch.len()).step_by(run).map(move |start| (b, start..(start + run).min(batch.len())))
         })
         .collect();
-    let estimates: Vec<Vec<Spectrum>> = runs
+    let found: Vec<Vec<Certificate>> = runs
         .par_iter()
         .map_init(Vec::new, |ke, (b, range)| {
             let batch = &batches[*b];
             let (k, n) = (batch.k, 3 * batch.k);
-            let mut out = vec![Spectrum::default(); range.len()];
             let x = &batch.rest[range.start * k..range.end * k];
             if batch.is_tet() {
-                // the nonzero spectrum of a 6 x 6 matrix
+                // the nonzero spectrum of a 6 x 6 matrix, exactly
+                let mut spectra = vec![Default::default(); range.len()];
                 let (g, volume) = (&batch.stress_grads[range.start * 4..range.end * 4], &batch.volume[range.clone()]);
-                tet_spectra(x, g, volume, batch.lame.0, batch.lame.1, &mut out);
-                return out;
+                tet_spectra(x, g, volume, batch.lame.0, batch.lame.1, &mut spectra);
+                return (spectra.iter())
+                    .map(|s| Certificate {
+                        lambda_max: s.lambda_max,
+                        rigid_residual: s.rigid_residual,
+                        stiff: s.ratio() >= floor,
+                    })
+                    .collect();
             }
             ke.resize(range.len() * n * n, 0.0);
             for (i, m) in range.clone().zip(ke.chunks_exact_mut(n * n)) {
                 batch.element_matrix_into(i, m);
             }
-            // a polynomial basis moves rigidly by its first (constant)
-            // coefficient and the identity's coefficients
-            let modes = if batch.kind == ElementKind::Dg { RigidModes::Modal(x) } else { RigidModes::Nodal(x) };
-            stiffness_spectra(ke, modes, &mut out);
+            let mut out = vec![Certificate::default(); range.len()];
+            stiffness_certificates(ke, batch.rigid_modes(range.clone()), floor, &mut out);
             out
         })
         .collect();
-    let mut per_batch: Vec<Vec<Spectrum>> =
+    let mut per_batch: Vec<Vec<Certificate>> =
         batches.iter().zip(first).map(|(b, &from)| Vec::with_capacity(b.len() - from)).collect();
-    for ((b, _), run) in runs.iter().zip(estimates) {
+    for ((b, _), run) in runs.iter().zip(found) {
         per_batch[*b].extend(run);
     }
     per_batch

@@ -31,6 +31,7 @@ use thiserror::Error;
 use crate::material::Material;
 use crate::mesh::PolyMesh;
 use cleave_kernels::corotation::MAX_NODES;
+use cleave_kernels::spectrum::{stiffness_spectrum, tet_spectrum, RigidModes, Spectrum};
 
 /// An element the basis cannot be built on.
 #[derive(Clone, Debug, Error, PartialEq)]
@@ -74,12 +75,14 @@ pub enum BasisError {
         element: usize,
     },
     /// The element stiffness has a soft mode: its seventh eigenvalue is
-    /// negligible against its largest.
-    #[error("element {element} has a soft mode: λ7/λmax of its stiffness is {ratio:.2e}, below the floor {floor:.0e} (two nodes almost on top of each other, or a sliver)")]
+    /// negligible against its largest (certified below the floor, see
+    /// [`HealthFloors`]).
+    #[error("element {element} has a soft mode: λ7/λmax of its stiffness is below the floor {floor:.0e} (estimated at {ratio:.2e}; two nodes almost on top of each other, or a sliver)")]
     SoftElement {
         /// The element's id.
         element: usize,
-        /// λ7/λmax of the element stiffness.
+        /// λ7/λmax of the element stiffness as [`Batch::stiffness_spectrum`]
+        /// estimates it (from above: the floor's certificate decides).
         ratio: f64,
         /// The floor it must reach.
         floor: f64,
@@ -188,9 +191,6 @@ pub struct Batch {
     pub weights: Vec<f64>,
     /// Quadrature points per element.
     pub points_per_element: usize,
-    /// `λ₇ / λ_max` of each element's stiffness (the health check's
-    /// measure of its softest deformation), one per element.
-    pub stiffness_ratio: Vec<f64>,
     /// The polynomial basis of each element (discontinuous Galerkin
     /// batches only; empty otherwise).
     pub dg: Vec<dg::DgBasis>,
@@ -234,7 +234,6 @@ impl Batch {
         copy(&mut self.triangles, n, from, to);
         copy(&mut self.points, n, from, to);
         copy(&mut self.weights, n, from, to);
-        copy(&mut self.stiffness_ratio, n, from, to);
         if !self.dg.is_empty() {
             self.dg.swap(from, to);
         }
@@ -257,7 +256,6 @@ impl Batch {
         keep(&mut self.triangles, n, len);
         keep(&mut self.points, n, len);
         keep(&mut self.weights, n, len);
-        keep(&mut self.stiffness_ratio, n, len);
         keep(&mut self.dg, n, len);
         self.elements.truncate(len);
     }
@@ -293,7 +291,6 @@ impl Batch {
         resize_with_room(&mut self.triangles, n * triangles, [0; 3]);
         resize_with_room(&mut self.points, n * quadrature, [0.0; 3]);
         resize_with_room(&mut self.weights, n * quadrature, 0.0);
-        resize_with_room(&mut self.stiffness_ratio, n, 0.0);
     }
 
     /// Removes entry `i`; the last entry takes its place.
@@ -315,7 +312,6 @@ impl Batch {
         self.triangles.append(&mut other.triangles);
         self.points.append(&mut other.points);
         self.weights.append(&mut other.weights);
-        self.stiffness_ratio.append(&mut other.stiffness_ratio);
         self.dg.append(&mut other.dg);
     }
 
@@ -378,6 +374,34 @@ impl Batch {
                 }
             }
         }
+    }
+
+    /// How the coefficients of entries `range` move rigidly: a polynomial
+    /// basis by its first (constant) coefficient and the identity's
+    /// coefficients, a nodal one by moving its nodes.
+    fn rigid_modes(&self, range: std::ops::Range<usize>) -> RigidModes<'_> {
+        let x = &self.rest[range.start * self.k..range.end * self.k];
+        match self.kind {
+            ElementKind::Dg => RigidModes::Modal(x),
+            _ => RigidModes::Nodal(x),
+        }
+    }
+
+    /// The spectrum of entry `i`'s stiffness: `λ_max`, `λ₇` and the rigid
+    /// residual, exact for a tetrahedron, else estimated (by power and
+    /// inverse iteration, [`cleave_kernels::spectrum`]). The health check
+    /// certifies the floor on `λ₇ / λ_max` without it; this is the measure
+    /// itself, for diagnostics and error messages.
+    pub fn stiffness_spectrum(&self, i: usize) -> Spectrum {
+        if self.is_tet() {
+            let x = std::array::from_fn(|a| self.rest[4 * i + a]);
+            let g = std::array::from_fn(|a| self.stress_grads[4 * i + a]);
+            return tet_spectrum(&x, &g, self.volume[i], self.lame.0, self.lame.1);
+        }
+        let n = 3 * self.k;
+        let mut ke = vec![0.0; n * n];
+        self.element_matrix_into(i, &mut ke);
+        stiffness_spectrum(&ke, self.rigid_modes(i..i + 1))
     }
 
     /// The gradient `Σ_a v_a ⊗ ḡ_a` (row-major, `G[r][c] = ∂v_r/∂x_c`) of the
@@ -512,9 +536,8 @@ fn build_new_entries(
                 harmonic::build_batch(batches, mesh, material, &face_bases, &options.harmonic, k, &elements)?
             }
             ElementKind::Dg => {
-                let (mut batch, integrated) = dg::build_batch(mesh, material, &options.dg, elements, inherit)?;
+                let (batch, integrated) = dg::build_batch(mesh, material, &options.dg, elements, inherit)?;
                 faces_integrated += integrated;
-                batch.stiffness_ratio = vec![0.0; batch.len()];
                 batch_for(batches, batch.kind, batch.k, batch.points_per_element, batch.lame).append(batch);
             }
         }
@@ -526,7 +549,7 @@ fn build_new_entries(
         QuadratureRule::Consistent => take_soft_mean_value(batches, &first, &mut verdicts),
         _ => Default::default(),
     };
-    health::record(batches, &first, verdicts)?;
+    health::first_failure(batches, &first, verdicts)?;
     let mut first: Vec<usize> = batches.iter().map(Batch::len).collect();
     for (k, elements) in refined {
         let rule = QuadratureRule::ConsistentGauss(REFINED_QUADRATURE_ORDER);
@@ -544,7 +567,7 @@ fn build_new_entries(
 fn take_soft_mean_value(
     batches: &mut [Batch],
     first: &[usize],
-    verdicts: &mut [Vec<Result<f64, BasisError>>],
+    verdicts: &mut [Vec<Result<(), BasisError>>],
 ) -> std::collections::BTreeMap<usize, Vec<u32>> {
     let mut soft: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
     for ((batch, verdicts), &from) in batches.iter_mut().zip(verdicts.iter_mut()).zip(first) {
