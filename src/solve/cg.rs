@@ -94,7 +94,12 @@ pub struct ConjugateGradient {
     /// stored as its upper triangle `[m00, m01, m02, m11, m12, m22]`.
     inverse_blocks: Vec<[f64; 6]>,
     /// The caller's block structure, on which the `f64` residual is taken
-    /// from the caller's values (see [`ConjugateGradient::solve`]).
+    /// from the caller's values (see [`ConjugateGradient::solve`]): a copy
+    /// kept by [`LinearSolver::analyze`] and
+    /// [`LinearSolver::analyze_blocks`] for `solve`, which is not given it
+    /// again; empty after [`LinearSolver::analyze_pattern`], whose
+    /// [`LinearSolver::solve_values`] is (a copy of 1 ms per cut on
+    /// bunny_100k saved).
     given: BlockStructure,
     /// The matrix values in the solver's layout rounded to `f32`, for the
     /// products of the iteration, and as they are only for a matrix beyond
@@ -176,9 +181,14 @@ const REPLACE_AT: f64 = 1e-3;
 /// iterations for three digits that a new round took in fewer than 100.)
 const DRIFTED: f64 = 1.1;
 
-/// The caller's `f64` values and right-hand side (its layout and
-/// numbering), from which exact residuals are taken.
-type Caller<'a> = (&'a [f64], &'a [f64]);
+/// The caller's block structure, `f64` values and right-hand side (its
+/// layout and numbering), from which exact residuals are taken.
+#[derive(Clone, Copy)]
+struct Caller<'a> {
+    structure: BlockColumns<'a>,
+    values: &'a [f64],
+    b: &'a [f64],
+}
 
 /// The matrix an iteration's products take: the values rounded to `f32` in
 /// the solver's layout; the solver's `f64` copy of a matrix beyond `f32`'s
@@ -190,7 +200,7 @@ type Caller<'a> = (&'a [f64], &'a [f64]);
 enum Operator<'a> {
     Rounded(&'a [f32]),
     Copied(&'a [f64]),
-    Caller(&'a [f64]),
+    Caller(Caller<'a>),
 }
 
 /// What a round of [`ConjugateGradient::iterate`] is given: the goal for
@@ -571,29 +581,28 @@ impl ConjugateGradient {
         partial.iter().sum()
     }
 
-    /// `self.r = b - A x` with the caller's `f64` values `given` and
-    /// right-hand side `b` (in the caller's layout and numbering), for `x`
-    /// in the solver's numbering; returns `|r|`. (The product runs on the
-    /// caller's structure: the solver's copy of the values is `f32`.)
-    fn exact_residual(&mut self, given: &[f64], b: &[f64], x: &[f64]) -> f64 {
+    /// `self.r = b - A x` with the `caller`'s `f64` values and right-hand
+    /// side `b` (in its layout and numbering), for `x` in the solver's
+    /// numbering; returns `|r|`. (The product runs on the caller's
+    /// structure: the solver's copy of the values is `f32`.)
+    fn exact_residual(&mut self, caller: Caller<'_>, x: &[f64]) -> f64 {
         let mut partial = std::mem::take(&mut self.partial);
-        self.caller_product(given, x, &mut partial);
+        self.caller_product(caller, x, &mut partial);
         self.partial = partial;
-        self.r_given.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+        self.r_given.par_iter_mut().zip(caller.b).for_each(|(r, b)| *r = b - *r);
         self.numbering.to_new(as_blocks(&self.r_given), as_blocks_mut(&mut self.r));
         dot(&self.r, &self.r).sqrt()
     }
 
-    /// `self.r_given = A x` with the caller's `f64` values `given` on its
+    /// `self.r_given = A x` with the `caller`'s `f64` values on its
     /// structure and numbering, for `x` in the solver's numbering (carried
     /// into `self.x_given`); returns `x · A x`, summed per fixed chunk of
     /// the caller's blocks (into `partial`) and the chunk sums in order.
-    fn caller_product(&mut self, given: &[f64], x: &[f64], partial: &mut [f64]) -> f64 {
+    fn caller_product(&mut self, caller: Caller<'_>, x: &[f64], partial: &mut [f64]) -> f64 {
         let (mut x_given, mut y_given) = (std::mem::take(&mut self.x_given), std::mem::take(&mut self.r_given));
         self.numbering.to_old(as_blocks(x), as_blocks_mut(&mut x_given));
-        let structure = self.given.columns();
         y_given.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (y, part))| {
-            *part = block_products(structure, given, &x_given, c * CHUNK_BLOCKS, y);
+            *part = block_products(caller.structure, caller.values, &x_given, c * CHUNK_BLOCKS, y);
         });
         (self.x_given, self.r_given) = (x_given, y_given);
         partial.iter().sum()
@@ -613,7 +622,7 @@ impl ConjugateGradient {
         let operator = match (exact, self.rounded) {
             (false, _) => Operator::Rounded(&values32),
             (true, false) => Operator::Copied(&values),
-            (true, true) => Operator::Caller(caller.0),
+            (true, true) => Operator::Caller(caller),
         };
         let out = self.iterate(operator, caller, round, x);
         (self.values32, self.values) = (values32, values);
@@ -626,8 +635,8 @@ impl ConjugateGradient {
         match operator {
             Operator::Rounded(values) => self.matvec(values, x, y, partial),
             Operator::Copied(values) => self.matvec(values, x, y, partial),
-            Operator::Caller(given) => {
-                let x_ay = self.caller_product(given, x, partial);
+            Operator::Caller(caller) => {
+                let x_ay = self.caller_product(caller, x, partial);
                 self.numbering.to_new(as_blocks(&self.r_given), as_blocks_mut(y));
                 x_ay
             }
@@ -700,7 +709,7 @@ impl ConjugateGradient {
             }
             let drifting = rounded && residual <= REPLACE_AT * replaced && ROUNDED_DRIFT * replaced > 0.5 * round.goal;
             if residual <= round.goal || drifting {
-                let exact = self.exact_residual(caller.0, caller.1, x);
+                let exact = self.exact_residual(caller, x);
                 if exact <= round.goal || !exact.is_finite() {
                     return Ok(Ended { iterations: it + 1, residual: exact, stalled: false });
                 }
@@ -732,7 +741,7 @@ impl ConjugateGradient {
             let coarse = self.coarse.as_ref().filter(|_| blockwise);
             next_direction(&mut self.p, &self.z, coarse, beta);
         }
-        let exact = self.exact_residual(caller.0, caller.1, x);
+        let exact = self.exact_residual(caller, x);
         Ok(Ended { iterations: round.budget, residual: exact, stalled: false })
     }
 
@@ -763,14 +772,9 @@ impl ConjugateGradient {
     }
 
     /// The solve of [`LinearSolver::solve`] in the solver's numbering (`b`
-    /// and `x`), the caller's values and right-hand side `given` and
-    /// `b_given` for the exact residual.
-    fn solve_own(
-        &mut self,
-        (given, b_given): (&[f64], &[f64]),
-        b: &[f64],
-        x: &mut [f64],
-    ) -> Result<SolveStats, SolveError> {
+    /// and `x`), the `caller`'s structure, values and right-hand side for
+    /// the exact residual.
+    fn solve_own(&mut self, caller: Caller<'_>, b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError> {
         let norm_b = dot(b, b).sqrt();
         if norm_b == 0.0 {
             x.fill(0.0);
@@ -781,8 +785,8 @@ impl ConjugateGradient {
         // and, when the history will project, its exact products)
         let made = self.pending && self.history.would_project();
         let (mut norm_r, sums) = match self.pending {
-            true => self.carry_values(given, b, x, made)?,
-            false => (self.exact_residual(given, b_given, x), None),
+            true => self.carry_values(caller.values, b, x, made)?,
+            false => (self.exact_residual(caller, x), None),
         };
         let (mut iterations, mut exact) = (0, !self.rounded);
         self.history.begin(x);
@@ -799,7 +803,7 @@ impl ConjugateGradient {
             if sums.is_some() {
                 drift_from = norm_r;
             } else if norm_r <= goal {
-                norm_r = self.exact_residual(given, b_given, x);
+                norm_r = self.exact_residual(caller, x);
             }
         }
         // (a lagged coarse level serves until the solve has spent as many
@@ -822,7 +826,7 @@ impl ConjugateGradient {
                 });
             }
             let budget = lagged.map_or(budget, |most| budget.min(most.saturating_sub(iterations).max(1)));
-            let ended = self.iterate_on(exact, (given, b_given), Round { goal, budget, start: drift_from }, x)?;
+            let ended = self.iterate_on(exact, caller, Round { goal, budget, start: drift_from }, x)?;
             iterations += ended.iterations;
             norm_r = ended.residual;
             drift_from = norm_r;
@@ -1107,7 +1111,6 @@ impl ConjugateGradient {
         // solver renewed by a cut writes into pages it already has)
         self.numbering.renew(blocks);
         self.history.resize(n);
-        self.given.clone_from(blocks);
         // (named in the caller's numbering)
         if let Some(block) = self.numbering.missing_diagonal() {
             return Err(SolveError::Analysis(format!("block {block} has no diagonal")));
@@ -1147,19 +1150,29 @@ impl ConjugateGradient {
         Ok(())
     }
 
-    /// Solves with the matrix of `values` (see [`LinearSolver::solve`]).
-    fn solve_with(&mut self, values: &[f64], b: &[f64], x: &mut [f64]) -> Result<SolveStats, SolveError> {
+    /// Solves with the matrix of `values` on the block structure
+    /// `structure` the solver was analysed for (see
+    /// [`LinearSolver::solve`]).
+    fn solve_with(
+        &mut self,
+        structure: &BlockStructure,
+        values: &[f64],
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<SolveStats, SolveError> {
         if b.iter().chain(x.iter()).any(|v| !v.is_finite()) {
             return Err(SolveError::NonFinite);
         }
         let n = self.b.len();
-        if values.len() != self.values32.len() || b.len() != n || x.len() != n {
+        let analysed = 3 * structure.len() == n && structure.values_len() == self.values32.len();
+        if !analysed || values.len() != self.values32.len() || b.len() != n || x.len() != n {
             return Err(SolveError::NotReady);
         }
         let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
         self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
         self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
-        let stats = self.solve_own((values, b), &b_own, &mut x_own);
+        let caller = Caller { structure: structure.columns(), values, b };
+        let stats = self.solve_own(caller, &b_own, &mut x_own);
         self.coarse_age.solved(stats.as_ref().ok().map(|s| s.iterations));
         self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
         (self.b, self.x) = (b_own, x_own);
@@ -1173,6 +1186,8 @@ impl LinearSolver for ConjugateGradient {
         self.analyze_blocks(pattern, &blocks)
     }
 
+    /// Keeps a copy of `blocks` for [`LinearSolver::solve`], which is not
+    /// given the structure again.
     fn analyze_blocks(
         &mut self,
         pattern: SymbolicSparseColMatRef<'_, usize>,
@@ -1181,11 +1196,16 @@ impl LinearSolver for ConjugateGradient {
         if 3 * blocks.len() != pattern.nrows() || blocks.values_len() != pattern.row_idx().len() {
             return Err(SolveError::Analysis("the block structure is not the pattern's".into()));
         }
-        self.analyze_structure(blocks)
+        self.analyze_structure(blocks)?;
+        self.given.clone_from(blocks);
+        Ok(())
     }
 
-    /// The iteration reads the block structure alone, never the scalar rows.
+    /// The iteration reads the block structure alone, never the scalar
+    /// rows; [`LinearSolver::solve_values`] is given the structure again,
+    /// so no copy is kept.
     fn analyze_pattern(&mut self, pattern: SystemPattern<'_>) -> Result<(), SolveError> {
+        self.given = BlockStructure::default();
         self.analyze_structure(pattern.blocks())
     }
 
@@ -1195,12 +1215,12 @@ impl LinearSolver for ConjugateGradient {
 
     fn solve_values(
         &mut self,
-        _pattern: SystemPattern<'_>,
+        pattern: SystemPattern<'_>,
         values: &[f64],
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
-        self.solve_with(values, b, x)
+        self.solve_with(pattern.blocks(), values, b, x)
     }
 
     /// Takes note of new values: the next solve carries them into the
@@ -1230,7 +1250,10 @@ impl LinearSolver for ConjugateGradient {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<SolveStats, SolveError> {
-        self.solve_with(matrix.parts().1, b, x)
+        let given = std::mem::take(&mut self.given);
+        let solved = self.solve_with(&given, matrix.parts().1, b, x);
+        self.given = given;
+        solved
     }
 
     fn set_reference(&mut self, matrix: SparseColMatRef<'_, usize, f64>) -> Result<(), SolveError> {
