@@ -250,14 +250,21 @@ fn gather<S: Simd>(simd: S, value: impl Fn(usize) -> f64) -> Lanes<S> {
     Lanes::load(simd, &lane[..width])
 }
 
+/// The lanes of three results, each as an array (lane `l` at `[l]`).
+#[inline(always)]
+fn unpack<S: Simd>(found: [Lanes<S>; 3]) -> [[f64; 16]; 3] {
+    let width = Lanes::<S>::WIDTH;
+    let mut values = [[0.0f64; 16]; 3];
+    for (v, lanes) in values.iter_mut().zip(found) {
+        lanes.store(&mut v[..width]);
+    }
+    values
+}
+
 /// Lane `l` of the estimates `[λ_max, λ₇, rigid residual]` into `out[l]`.
 #[inline(always)]
 fn scatter<S: Simd>(estimates: [Lanes<S>; 3], out: &mut [Spectrum]) {
-    let width = Lanes::<S>::WIDTH;
-    let mut values = [[0.0f64; 16]; 3];
-    for (v, lanes) in values.iter_mut().zip(estimates) {
-        lanes.store(&mut v[..width]);
-    }
+    let values = unpack(estimates);
     for (l, s) in out.iter_mut().enumerate() {
         *s = Spectrum { lambda_max: values[0][l], lambda_7: values[1][l], rigid_residual: values[2][l] };
     }
@@ -267,11 +274,7 @@ fn scatter<S: Simd>(estimates: [Lanes<S>; 3], out: &mut [Spectrum]) {
 /// [`Goal::Certify`]) into `out[l]`.
 #[inline(always)]
 fn scatter_certificates<S: Simd>(found: [Lanes<S>; 3], out: &mut [Certificate]) {
-    let width = Lanes::<S>::WIDTH;
-    let mut values = [[0.0f64; 16]; 3];
-    for (v, lanes) in values.iter_mut().zip(found) {
-        lanes.store(&mut v[..width]);
-    }
+    let values = unpack(found);
     for (l, c) in out.iter_mut().enumerate() {
         *c = Certificate { lambda_max: values[0][l], rigid_residual: values[2][l], stiff: values[1][l] == 1.0 };
     }
