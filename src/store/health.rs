@@ -15,7 +15,8 @@
 //! --only simd`, AMD EPYC, AVX-512: 0.37 µs per tetrahedron; in a run of
 //! 32 hexahedra, 24 x 24 `K_e`, 2.7 µs each on an Intel Xeon, against 5.1
 //! µs for the estimate of `λ₇` by inverse iteration it replaced: `cargo
-//! bench --bench cut -- run_of_32`), so the check stays on. A failure is an error naming the element.
+//! bench --bench cut -- run_of_32`), so the check stays on. A failure is
+//! an error naming the element.
 
 use cleave_kernels::spectrum::{stiffness_certificates, tet_spectra, Certificate};
 use rayon::prelude::*;
