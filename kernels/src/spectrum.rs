@@ -42,15 +42,18 @@
 //! is one from above, which an iteration stopped early leaves too high),
 //! and it costs the inverse iteration less: 86 against 162 µs for a run of
 //! 32 hexahedra, 42 against 89 µs for 32 wedges (`cargo bench --bench cut
-//! -- run_of_32`, one run, Intel Xeon, AVX-512). [`stiffness_spectra`] runs the estimates of several elements of
-//! one size at once, one element per SIMD lane (each lane stops iterating
-//! where its own element's estimate settles, its values then held): the
-//! elements of a cut are many small matrices, whose triangular solves are
-//! chains of dependent updates that only more elements, not wider rows,
-//! fill. The lanes take the same operations in the same order as the
-//! scalar reference (no fused multiply-add, every sum in index order), so
-//! every element's estimates are the same bits at every SIMD level, alone
-//! or beside any other elements: the result depends neither on the thread
+//! -- run_of_32`, one run, Intel Xeon, AVX-512).
+//!
+//! [`stiffness_spectra`] runs the estimates of several elements of one
+//! size at once (and [`stiffness_certificates`] their certificates), one
+//! element per SIMD lane (each lane stops iterating where its own
+//! element's estimate settles, its values then held): the elements of a
+//! cut are many small matrices, whose triangular solves are chains of
+//! dependent updates that only more elements, not wider rows, fill. The
+//! lanes take the same operations in the same order as the scalar
+//! reference (no fused multiply-add, every sum in index order), so every
+//! element's estimates are the same bits at every SIMD level, alone or
+//! beside any other elements: the result depends neither on the thread
 //! that computes it nor on the machine. `cargo bench --bench cut --
 //! health_spectrum` measures one element alone and in a run of 32.
 
