@@ -869,41 +869,54 @@ mod tests {
         out
     }
 
-    #[test]
-    fn every_lane_gives_the_scalar_estimates_at_every_level() {
-        let x = cube_corners();
+    /// The scalar results of `goal` for every one of `matrices` (as bits:
+    /// `[λ_max, λ₇ or 1 where certified else 0, rigid residual]`), checked
+    /// to be those of every SIMD level with the elements side by side in
+    /// every rotation (so that each sits in every lane, beside every
+    /// other).
+    fn every_lane_gives_the_scalar(x: &[[f64; 3]], matrices: &[Vec<f64>], goal: Goal) -> Vec<[u64; 3]> {
         let n = 3 * x.len();
-        let matrices = assorted(&x);
-        // the scalar reference, one element at a time
         let reference: Vec<[u64; 3]> = matrices
             .iter()
             .map(|k| {
                 let mut work = vec![0.0; work_len(n)];
-                estimate(k, &x, false, Goal::Estimate, &mut work).map(f64::to_bits)
+                estimate(k, x, false, goal, &mut work).map(f64::to_bits)
             })
             .collect();
-        // every level, the elements side by side in every rotation (so
-        // each sits in every lane, beside every other)
         for level in crate::lanes::levels::available("spectrum lanes") {
             for shift in 0..matrices.len() {
                 let order: Vec<usize> = (0..matrices.len()).map(|i| (i + shift) % matrices.len()).collect();
                 let k_e: Vec<f64> = order.iter().flat_map(|&i| matrices[i].iter().copied()).collect();
                 let positions: Vec<[f64; 3]> = order.iter().flat_map(|_| x.iter().copied()).collect();
-                let mut out = vec![Spectrum::default(); order.len()];
-                let op = Spectra {
-                    k_e: &k_e,
-                    positions: &positions,
-                    modal: false,
-                    goal: Goal::Estimate,
-                    out: Results::Spectra(&mut out),
+                let run = |out| {
+                    let op = Spectra { k_e: &k_e, positions: &positions, modal: false, goal, out };
+                    crate::lanes::levels::run(level, op);
                 };
-                crate::lanes::levels::run(level, op);
-                for (s, &i) in out.iter().zip(&order) {
-                    let got = [s.lambda_max, s.lambda_7, s.rigid_residual].map(f64::to_bits);
-                    assert_eq!(got, reference[i], "{level:?}, matrix {i}: {s:?}");
+                let got: Vec<[f64; 3]> = match goal {
+                    Goal::Estimate => {
+                        let mut out = vec![Spectrum::default(); order.len()];
+                        run(Results::Spectra(&mut out));
+                        out.iter().map(|s| [s.lambda_max, s.lambda_7, s.rigid_residual]).collect()
+                    }
+                    Goal::Certify { .. } => {
+                        let mut out = vec![Certificate::default(); order.len()];
+                        run(Results::Certificates(&mut out));
+                        out.iter().map(|c| [c.lambda_max, if c.stiff { 1.0 } else { 0.0 }, c.rigid_residual]).collect()
+                    }
+                };
+                for (g, &i) in got.iter().zip(&order) {
+                    assert_eq!(g.map(f64::to_bits), reference[i], "{level:?}, {goal:?}, matrix {i}: {g:?}");
                 }
             }
         }
+        reference
+    }
+
+    #[test]
+    fn every_lane_gives_the_scalar_estimates_at_every_level() {
+        let x = cube_corners();
+        let matrices = assorted(&x);
+        every_lane_gives_the_scalar(&x, &matrices, Goal::Estimate);
         // and the outcomes are the ones each matrix was made for
         let s: Vec<Spectrum> = matrices.iter().map(|k| stiffness_spectrum(k, RigidModes::Nodal(&x))).collect();
         assert!(s[..3].iter().all(|s| (s.lambda_7 - 1e-3).abs() < 1e-9 && s.rigid_residual < 1e-12), "{s:?}");
@@ -945,38 +958,7 @@ mod tests {
     #[test]
     fn every_lane_gives_the_scalar_certificate_at_every_level() {
         let x = cube_corners();
-        let n = 3 * x.len();
-        let matrices = assorted(&x);
-        let floor = 1e-4;
-        let reference: Vec<[u64; 3]> = matrices
-            .iter()
-            .map(|k| {
-                let mut work = vec![0.0; work_len(n)];
-                estimate(k, &x, false, Goal::Certify { floor }, &mut work).map(f64::to_bits)
-            })
-            .collect();
-        for level in crate::lanes::levels::available("certificate lanes") {
-            for shift in 0..matrices.len() {
-                let order: Vec<usize> = (0..matrices.len()).map(|i| (i + shift) % matrices.len()).collect();
-                let k_e: Vec<f64> = order.iter().flat_map(|&i| matrices[i].iter().copied()).collect();
-                let positions: Vec<[f64; 3]> = order.iter().flat_map(|_| x.iter().copied()).collect();
-                let mut out = vec![Certificate::default(); order.len()];
-                let goal = Goal::Certify { floor };
-                let op = Spectra {
-                    k_e: &k_e,
-                    positions: &positions,
-                    modal: false,
-                    goal,
-                    out: Results::Certificates(&mut out),
-                };
-                crate::lanes::levels::run(level, op);
-                for (c, &i) in out.iter().zip(&order) {
-                    let stiff = if c.stiff { 1.0f64 } else { 0.0 };
-                    let got = [c.lambda_max, stiff, c.rigid_residual].map(f64::to_bits);
-                    assert_eq!(got, reference[i], "{level:?}, matrix {i}: {c:?}");
-                }
-            }
-        }
+        let reference = every_lane_gives_the_scalar(&x, &assorted(&x), Goal::Certify { floor: 1e-4 });
         // of the sound matrices (λ₇ / λ_max 1e-3 / 1.35, 1e-3 / 6.6 and
         // 1e-3 / 34.5) the first two pass a floor of 1e-4; the null mode,
         // the negative eigenvalue, zero and NaN fail; the matrix resisting
