@@ -4,8 +4,10 @@
 //! leaving a core idle behind its longest test. Run one file's tests with
 //! `cargo test --release --test integration cutting::`.
 //!
-//! The counting allocators of `tests/allocations.rs` and `tests/fuzz.rs`
-//! are global to their binaries, which stay apart.
+//! The counting allocators of `tests/allocations.rs`, `tests/fuzz.rs` and
+//! `tests/soak.rs` are global to their binaries, which stay apart (the
+//! soak's heap comparison counts every thread's allocations: beside other
+//! tests it counted theirs too).
 
 mod common;
 
@@ -34,7 +36,6 @@ mod refine;
 mod render;
 mod scenes;
 mod slivers;
-mod soak;
 mod spectra;
 mod split;
 mod vtu_meshio;
