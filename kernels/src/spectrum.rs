@@ -119,17 +119,26 @@ enum Goal {
     Certify { floor: f64 },
 }
 
-/// Where the kernel writes its results, one per element.
+/// Where the kernel writes its results, one per element: the estimates,
+/// or the certificates of a floor.
 enum Results<'a> {
     Spectra(&'a mut [Spectrum]),
-    Certificates(&'a mut [Certificate]),
+    Certificates(f64, &'a mut [Certificate]),
 }
 
 impl Results<'_> {
     fn len(&self) -> usize {
         match self {
             Results::Spectra(out) => out.len(),
-            Results::Certificates(out) => out.len(),
+            Results::Certificates(_, out) => out.len(),
+        }
+    }
+
+    /// What the kernel computes for these results.
+    fn goal(&self) -> Goal {
+        match self {
+            Results::Spectra(_) => Goal::Estimate,
+            &Results::Certificates(floor, _) => Goal::Certify { floor },
         }
     }
 }
@@ -166,17 +175,17 @@ pub fn stiffness_spectrum(k_e: &[f64], modes: RigidModes) -> Spectrum {
 /// their row-major `n x n` matrices one after another, `modes` their `k`
 /// positions each (`n = 3 k`).
 pub fn stiffness_spectra(k_e: &[f64], modes: RigidModes, out: &mut [Spectrum]) {
-    run_spectra(k_e, modes, Goal::Estimate, Results::Spectra(out));
+    run_spectra(k_e, modes, Results::Spectra(out));
 }
 
 /// The certificates of the module docs, whether `λ₇ ≥ floor λ_max`, of
 /// `out.len()` elements of one size, laid out as for [`stiffness_spectra`].
 pub fn stiffness_certificates(k_e: &[f64], modes: RigidModes, floor: f64, out: &mut [Certificate]) {
-    run_spectra(k_e, modes, Goal::Certify { floor }, Results::Certificates(out));
+    run_spectra(k_e, modes, Results::Certificates(floor, out));
 }
 
-/// Checks the layout and runs [`Spectra`] for `goal`.
-fn run_spectra(k_e: &[f64], modes: RigidModes, goal: Goal, out: Results) {
+/// Checks the layout and runs [`Spectra`] into `out`.
+fn run_spectra(k_e: &[f64], modes: RigidModes, out: Results) {
     let elements = out.len();
     if elements == 0 {
         return;
@@ -186,7 +195,7 @@ fn run_spectra(k_e: &[f64], modes: RigidModes, goal: Goal, out: Results) {
     assert_eq!(positions.len(), k * elements, "the same number of positions per element");
     assert_eq!(k_e.len(), elements * 9 * k * k, "K_e must be 3k x 3k");
     let modal = matches!(modes, RigidModes::Modal(_));
-    crate::lanes::dispatch(Spectra { k_e, positions, modal, goal, out });
+    crate::lanes::dispatch(Spectra { k_e, positions, modal, out });
 }
 
 /// The dispatched body of [`stiffness_spectra`] and
@@ -195,7 +204,6 @@ struct Spectra<'a> {
     k_e: &'a [f64],
     positions: &'a [[f64; 3]],
     modal: bool,
-    goal: Goal,
     out: Results<'a>,
 }
 
@@ -205,7 +213,8 @@ impl pulp::WithSimd for Spectra<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
         let width = Lanes::<S>::WIDTH;
-        let Spectra { k_e, positions, modal, goal, mut out } = self;
+        let Spectra { k_e, positions, modal, mut out } = self;
+        let goal = out.goal();
         let elements = out.len();
         let k = positions.len() / elements;
         let n = 3 * k;
@@ -226,7 +235,7 @@ impl pulp::WithSimd for Spectra<'_> {
             let found = estimate(&matrix, &x, modal, goal, &mut work);
             match &mut out {
                 Results::Spectra(out) => scatter(found, &mut out[start..start + count]),
-                Results::Certificates(out) => scatter_certificates(found, &mut out[start..start + count]),
+                Results::Certificates(_, out) => scatter_certificates(found, &mut out[start..start + count]),
             }
         }
     }
@@ -889,7 +898,7 @@ mod tests {
                 let k_e: Vec<f64> = order.iter().flat_map(|&i| matrices[i].iter().copied()).collect();
                 let positions: Vec<[f64; 3]> = order.iter().flat_map(|_| x.iter().copied()).collect();
                 let run = |out| {
-                    let op = Spectra { k_e: &k_e, positions: &positions, modal: false, goal, out };
+                    let op = Spectra { k_e: &k_e, positions: &positions, modal: false, out };
                     crate::lanes::levels::run(level, op);
                 };
                 let got: Vec<[f64; 3]> = match goal {
@@ -898,9 +907,9 @@ mod tests {
                         run(Results::Spectra(&mut out));
                         out.iter().map(|s| [s.lambda_max, s.lambda_7, s.rigid_residual]).collect()
                     }
-                    Goal::Certify { .. } => {
+                    Goal::Certify { floor } => {
                         let mut out = vec![Certificate::default(); order.len()];
-                        run(Results::Certificates(&mut out));
+                        run(Results::Certificates(floor, &mut out));
                         out.iter().map(|c| [c.lambda_max, if c.stiff { 1.0 } else { 0.0 }, c.rigid_residual]).collect()
                     }
                 };
