@@ -115,6 +115,13 @@ impl CoarseSpace {
     /// pattern before a topology change, or an empty one): a space per cut
     /// reuses its predecessor's memory instead of faulting in fresh pages
     /// for its runs.
+    ///
+    /// After a blade cut of bunny_100k, a renewal took 6.7 ms of CPU
+    /// (sampled by `perf` over 24 cuts, Intel Xeon model 207): 0.7 ms
+    /// for the greedy aggregation, 1.5 ms for the aggregates' graph and
+    /// 2.7 ms for the columns' runs. So keeping the aggregates that a cut
+    /// did not touch would save little by itself. The graph and the runs
+    /// would have to be updated in place too.
     pub fn renew(blocks: &BlockStructure, max_aggregates: usize, chunk_blocks: usize, old: Self) -> Self {
         let n = blocks.ptr.len() - 1;
         let limit = max_aggregates.max(1);
