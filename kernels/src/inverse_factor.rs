@@ -1,99 +1,168 @@
 //! The inverse `M = L⁻¹` of a dense Cholesky factor (`A = L Lᵀ`), stored
-//! packed and rounded to `f32`, and its application `A⁻¹ v = Mᵀ (M v)`.
+//! in tiles and rounded to `f32` (or kept in `f64`), and its application
+//! `A⁻¹ v = Mᵀ (M v)`.
 //!
-//! Packed: the lower triangle of `M` by columns, each from its diagonal
-//! down, `n (n + 1) / 2` values. A preconditioner made of such blocks
-//! stays symmetric positive definite whatever the rounding (`M̃ᵀ M̃` is,
-//! for any rounded `M̃` with a nonzero diagonal), and its application
-//! reads half the bytes of `f64` values, with `f64` arithmetic throughout.
+//! A preconditioner made of such blocks stays symmetric positive definite
+//! whatever the rounding (`M̃ᵀ M̃` is, for any rounded `M̃` with a nonzero
+//! diagonal), and its application reads half the bytes of `f64` values,
+//! with `f64` arithmetic throughout.
 //!
 //! Triangular solves with `L` itself are chains: each unknown waits for
 //! the division and the sums of the one before it, and on a 106 x 106
 //! block they ran at 5 GFlop/s (Intel Xeon, AVX-512). With the inverse,
-//! `w = M v` adds column `j` times `v_j` into `w` (independent updates),
-//! and `(Mᵀ w)_j` is the dot product of column `j` with `w` from `j` down
-//! (independent of the other columns'), in eight running sums added in
-//! a fixed tree, then the tail: the same bits on every instruction set,
-//! under runtime dispatch so that those sums fill wide registers.
+//! both halves are products whose sums are independent of each other.
+//!
+//! Tiled: the lower triangle of `M` in 4 x 4 tiles, by tile columns, each
+//! from its diagonal tile down, every tile column-major; the entries above
+//! the diagonal and past the order `n` are zeros (`n` rounded up to a
+//! multiple of four, [`padded`]). Then `w = M v` adds, per tile column,
+//! its four columns times their four entries of `v` into each tile row of
+//! `w` (one load and store of `w` per four columns), and `v = Mᵀ w` takes
+//! four dot products per tile column at once, each in four running sums
+//! (one per row of a tile) added in a fixed tree: whole registers, no
+//! tails, and the same bits on every instruction set. Stored as packed
+//! columns instead (each from its diagonal down, `n (n + 1) / 2` values),
+//! the 98 blocks of order 54 of the clamped bunny_100k's coarse level took
+//! 103.7 µs at AVX2 against 46.2 µs tiled (`f32`, one thread, best of 5,
+//! Intel Xeon model 207): the columns' short stretches and per-column
+//! tails cost more than the products.
 
 use crate::lanes::{dispatched_level, SimdLevel};
+use crate::spmv::Value;
 
-/// Running sums of the dot products.
-const LANES: usize = 8;
+/// The order of a tile.
+const TILE: usize = 4;
 
-/// Values of the packed inverse of order `n`.
-pub fn packed_len(n: usize) -> usize {
-    n * (n + 1) / 2
+/// The types a tiled inverse factor is stored in: `f32` (half the bytes,
+/// for a preconditioner's blocks) or `f64` (for a solve that must be exact
+/// to rounding).
+pub trait Packed: Value {
+    /// `x` rounded to the type.
+    fn from_f64(x: f64) -> Self;
 }
 
-/// Packs the lower triangle of the column-major `n x n` matrix `dense`
-/// into `packed` (at least [`packed_len`]`(n)` long), rounded to `f32`.
-pub fn pack(dense: &[f64], n: usize, packed: &mut [f32]) {
-    let lower = (0..n).flat_map(|j| &dense[j * n + j..(j + 1) * n]);
-    packed[..packed_len(n)].iter_mut().zip(lower).for_each(|(p, &l)| *p = l as f32);
+impl Packed for f32 {
+    #[inline(always)]
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
 }
 
-/// `v = Mᵀ (M v)` for the packed inverse factor `m` of order `v.len()`;
-/// `w` (as long as `v`) is scratch.
-pub fn apply(m: &[f32], v: &mut [f64], w: &mut [f64]) {
-    assert_eq!(m.len(), packed_len(v.len()), "a packed inverse factor of the vector's order");
-    assert_eq!(w.len(), v.len(), "scratch of the vector's length");
-    apply_at(dispatched_level(SimdLevel::Avx2), Apply { m, v, w })
+impl Packed for f64 {
+    #[inline(always)]
+    fn from_f64(x: f64) -> Self {
+        x
+    }
 }
 
-/// [`apply`] at the instruction set `level`: the generic kernel for
-/// scalar, [`avx2::apply`] at AVX2 and above (the compiler's vectorisation
-/// of the generic dot products went through shuffles of two lanes at a
-/// time: 6 GFlop/s on 106 x 106 blocks).
-fn apply_at(level: SimdLevel, operands: Apply<'_>) {
+/// `n` rounded up to whole tiles: the length of the vectors [`apply`]
+/// works on.
+pub fn padded(n: usize) -> usize {
+    n.div_ceil(TILE) * TILE
+}
+
+/// Values of the tiled inverse of order `n`.
+pub fn tiled_len(n: usize) -> usize {
+    let tiles = n.div_ceil(TILE);
+    TILE * TILE * tiles * (tiles + 1) / 2
+}
+
+/// Stores the lower triangle of the column-major `n x n` matrix `dense`
+/// in `tiled` (at least [`tiled_len`]`(n)` long, see module docs), rounded
+/// to `T`.
+pub fn tile<T: Packed>(dense: &[f64], n: usize, tiled: &mut [T]) {
+    let tiles = n.div_ceil(TILE);
+    let mut at = 0;
+    for c in 0..tiles {
+        for r in c..tiles {
+            for q in 0..TILE {
+                for l in 0..TILE {
+                    let (i, j) = (TILE * r + l, TILE * c + q);
+                    let value = if i < n && j < n && i >= j { dense[j * n + i] } else { 0.0 };
+                    tiled[at] = T::from_f64(value);
+                    at += 1;
+                }
+            }
+        }
+    }
+}
+
+/// `v = Mᵀ (M v)` for the tiled inverse factor `m` of order `v.len()`;
+/// `scratch` (at least `2 `[`padded`]`(v.len())` long) is overwritten.
+pub fn apply<T: Packed>(m: &[T], v: &mut [f64], scratch: &mut [f64]) {
+    let n = v.len();
+    assert_eq!(m.len(), tiled_len(n), "a tiled inverse factor of the vector's order");
+    assert!(scratch.len() >= 2 * padded(n), "scratch of twice the padded order");
+    let (x, w) = scratch[..2 * padded(n)].split_at_mut(padded(n));
+    x[..n].copy_from_slice(v);
+    x[n..].fill(0.0);
+    apply_at(dispatched_level(SimdLevel::Avx2), Apply { m, x, w });
+    v.copy_from_slice(&x[..n]);
+}
+
+/// [`apply`] on the padded vector `x` at the instruction set `level`: the
+/// generic kernel for scalar, [`avx2::apply`] at AVX2 and above.
+fn apply_at<T: Packed>(level: SimdLevel, operands: Apply<'_, T>) {
     #[cfg(target_arch = "x86_64")]
     if level != SimdLevel::Scalar {
-        let Apply { m, v, w } = operands;
-        return avx2::apply(m, v, w);
+        let Apply { m, x, w } = operands;
+        if let Some(m) = T::as_f32(m) {
+            return avx2::apply(m, x, w);
+        }
+        if let Some(m) = T::as_f64(m) {
+            return avx2::apply(m, x, w);
+        }
+        return level.run(Apply { m, x, w });
     }
     level.run(operands)
 }
 
-struct Apply<'a> {
-    m: &'a [f32],
-    v: &'a mut [f64],
+/// `x = Mᵀ (M x)` for the padded vector `x`, `w` its scratch.
+struct Apply<'a, T> {
+    m: &'a [T],
+    x: &'a mut [f64],
     w: &'a mut [f64],
 }
 
-impl pulp::WithSimd for Apply<'_> {
+impl<T: Packed> pulp::WithSimd for Apply<'_, T> {
     type Output = ();
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        let Apply { m, v, w } = self;
-        let n = v.len();
-        // w = M v, column by column
+        let Apply { m, x, w } = self;
+        let tiles = x.len() / TILE;
+        let tile = |at: usize, q: usize, l: usize| m[at + TILE * q + l].to_f64();
+        // w = M x: per tile column, its four columns in order into every
+        // tile row
         w.fill(0.0);
         let mut at = 0;
-        for (j, &vj) in v.iter().enumerate() {
-            let column = &m[at..at + n - j];
-            at += n - j;
-            for (w, &m) in w[j..].iter_mut().zip(column) {
-                *w += f64::from(m) * vj;
+        for c in 0..tiles {
+            for r in c..tiles {
+                for l in 0..TILE {
+                    let mut s = w[TILE * r + l];
+                    for q in 0..TILE {
+                        s += tile(at, q, l) * x[TILE * c + q];
+                    }
+                    w[TILE * r + l] = s;
+                }
+                at += TILE * TILE;
             }
         }
-        // v = Mᵀ w, a dot product per column
+        // x = Mᵀ w: per tile column, four dot products in four running sums
         at = 0;
-        for (j, vj) in v.iter_mut().enumerate() {
-            let (column, below) = (&m[at..at + n - j], &w[j..]);
-            at += n - j;
-            let (mc, bc) = (column.chunks_exact(LANES), below.chunks_exact(LANES));
-            let mut tail = 0.0;
-            for (&m, b) in mc.remainder().iter().zip(bc.remainder()) {
-                tail += f64::from(m) * b;
-            }
-            let mut sums = [0.0f64; LANES];
-            for (m, b) in mc.zip(bc) {
-                for q in 0..LANES {
-                    sums[q] += f64::from(m[q]) * b[q];
+        for c in 0..tiles {
+            let mut sums = [[0.0f64; TILE]; TILE];
+            for r in c..tiles {
+                for (q, sum) in sums.iter_mut().enumerate() {
+                    for l in 0..TILE {
+                        sum[l] += tile(at, q, l) * w[TILE * r + l];
+                    }
                 }
+                at += TILE * TILE;
             }
-            *vj = (((sums[0] + sums[1]) + (sums[2] + sums[3])) + ((sums[4] + sums[5]) + (sums[6] + sums[7]))) + tail;
+            for (q, sum) in sums.iter().enumerate() {
+                x[TILE * c + q] = (sum[0] + sum[1]) + (sum[2] + sum[3]);
+            }
         }
     }
 }
@@ -101,56 +170,50 @@ impl pulp::WithSimd for Apply<'_> {
 /// [`Apply`] written with AVX2's instructions, in its order: the same bits.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{packed_len, LANES};
-    use crate::spmv::avx2::{lane_sum, Lanes};
+    use super::TILE;
+    use crate::spmv::avx2::Lanes;
     use core::arch::x86_64::*;
 
-    /// `v = Mᵀ (M v)`; panics without AVX2.
-    pub(super) fn apply(m: &[f32], v: &mut [f64], w: &mut [f64]) {
+    /// `x = Mᵀ (M x)` for the padded `x`; panics without AVX2.
+    pub(super) fn apply<T: Lanes>(m: &[T], x: &mut [f64], w: &mut [f64]) {
         assert!(is_x86_feature_detected!("avx2"), "the AVX2 kernel runs where AVX2 is");
-        assert!(m.len() >= packed_len(v.len()) && w.len() >= v.len());
+        let tiles = x.len() / TILE;
+        assert!(x.len() % TILE == 0 && w.len() == x.len() && m.len() >= super::tiled_len(x.len()));
         // SAFETY: AVX2 is available, and every read and write below lies
-        // within the columns of `m` (checked above) and within `v` and `w`.
-        unsafe { apply_avx2(m, v, w) }
+        // within the tiles of `m` (checked above) and within `x` and `w`.
+        unsafe { apply_avx2(m, x, w, tiles) }
     }
 
     #[target_feature(enable = "avx2")]
-    unsafe fn apply_avx2(m: &[f32], v: &mut [f64], w: &mut [f64]) {
-        let n = v.len();
-        let (mp, wp) = (m.as_ptr(), w.as_mut_ptr());
-        w[..n].fill(0.0);
+    unsafe fn apply_avx2<T: Lanes>(m: &[T], x: &mut [f64], w: &mut [f64], tiles: usize) {
+        let (mp, xp, wp) = (m.as_ptr(), x.as_mut_ptr(), w.as_mut_ptr());
+        w.fill(0.0);
         let mut at = 0;
-        for j in 0..n {
-            let (len, vj) = (n - j, v[j]);
-            let (column, wj) = (mp.add(at), wp.add(j));
-            let scale = _mm256_set1_pd(vj);
-            let full = len - len % 4;
-            for i in (0..full).step_by(4) {
-                let product = _mm256_mul_pd(_mm256_cvtps_pd(_mm_loadu_ps(column.add(i))), scale);
-                _mm256_storeu_pd(wj.add(i), _mm256_add_pd(_mm256_loadu_pd(wj.add(i)), product));
+        for c in 0..tiles {
+            let scale: [__m256d; TILE] = core::array::from_fn(|q| _mm256_set1_pd(*xp.add(TILE * c + q)));
+            for r in c..tiles {
+                let mut s = _mm256_loadu_pd(wp.add(TILE * r));
+                for (q, scale) in scale.iter().enumerate() {
+                    s = _mm256_add_pd(s, _mm256_mul_pd(T::load4(mp.add(at + TILE * q)), *scale));
+                }
+                _mm256_storeu_pd(wp.add(TILE * r), s);
+                at += TILE * TILE;
             }
-            for i in full..len {
-                *wj.add(i) += f64::from(*column.add(i)) * vj;
-            }
-            at += len;
         }
         at = 0;
-        for (j, vj) in v.iter_mut().enumerate() {
-            let len = n - j;
-            let (column, wj) = (mp.add(at), wp.add(j));
-            let full = len - len % LANES;
-            let mut tail = 0.0;
-            for i in full..len {
-                tail += f64::from(*column.add(i)) * *wj.add(i);
+        for c in 0..tiles {
+            let mut sums = [_mm256_setzero_pd(); TILE];
+            for r in c..tiles {
+                let wr = _mm256_loadu_pd(wp.add(TILE * r));
+                for (q, sum) in sums.iter_mut().enumerate() {
+                    *sum = _mm256_add_pd(*sum, _mm256_mul_pd(T::load4(mp.add(at + TILE * q)), wr));
+                }
+                at += TILE * TILE;
             }
-            let (mut low, mut high) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-            for i in (0..full).step_by(LANES) {
-                let (a, b) = f32::load(column.add(i));
-                low = _mm256_add_pd(low, _mm256_mul_pd(a, _mm256_loadu_pd(wj.add(i))));
-                high = _mm256_add_pd(high, _mm256_mul_pd(b, _mm256_loadu_pd(wj.add(i + 4))));
-            }
-            *vj = lane_sum(low, high) + tail;
-            at += len;
+            // lane q: (sums[q]₀ + sums[q]₁) + (sums[q]₂ + sums[q]₃)
+            let (low, high) = (_mm256_hadd_pd(sums[0], sums[1]), _mm256_hadd_pd(sums[2], sums[3]));
+            let pairs = (_mm256_permute2f128_pd(low, high, 0x20), _mm256_permute2f128_pd(low, high, 0x31));
+            _mm256_storeu_pd(xp.add(TILE * c), _mm256_add_pd(pairs.0, pairs.1));
         }
     }
 }
@@ -160,13 +223,18 @@ mod tests {
     use super::*;
 
     /// Against the matrix it inverts: for `A` symmetric positive definite
-    /// (orders with and without a tail of the running sums), `M` the
-    /// inverse of its Cholesky factor, `A (Mᵀ M v)` gives `v` back to the
-    /// rounding of `M` to `f32`, with the same bits on every instruction
-    /// set.
+    /// (orders filling their last tile, and not), `M` the inverse of its
+    /// Cholesky factor, `A (Mᵀ M v)` gives `v` back to the rounding of `M`
+    /// to `f32`, and to that of `f64` for `M` stored as `f64`, with the
+    /// same bits on every instruction set.
     #[test]
-    fn the_packed_inverse_factor_inverts_the_matrix_on_every_level() {
-        for n in [1, 7, 8, 30, 53] {
+    fn the_tiled_inverse_factor_inverts_the_matrix_on_every_level() {
+        inverts_on_every_level::<f32>(1e-5);
+        inverts_on_every_level::<f64>(1e-12);
+    }
+
+    fn inverts_on_every_level<T: Packed + Default>(tolerance: f64) {
+        for n in [1, 3, 4, 5, 7, 8, 11, 30, 53, 54, 108] {
             // A = B Bᵀ + n I
             let b = |i: usize, j: usize| ((i * 7 + j * 3) % 5) as f64 - 2.0;
             let a = |i: usize, j: usize| {
@@ -188,25 +256,32 @@ mod tests {
                     inverse[j * n + i] = -s / l[i * n + i];
                 }
             }
-            let mut packed = vec![0.0f32; packed_len(n)];
-            pack(&inverse, n, &mut packed);
+            let mut tiled = vec![T::default(); tiled_len(n)];
+            tile(&inverse, n, &mut tiled);
             let rhs: Vec<f64> = (0..n).map(|i| (i as f64 * 0.61).cos()).collect();
             let mut bits = None;
             for level in crate::lanes::levels::available("inverse_factor") {
-                let (mut v, mut w) = (rhs.clone(), vec![0.0; n]);
+                let (mut x, mut w) = (rhs.clone(), vec![f64::NAN; padded(n)]);
+                x.resize(padded(n), 0.0);
                 // (AVX2 and above run the explicit kernel, scalar the generic
                 // one: the bits compared below are the two kernels')
-                apply_at(level, Apply { m: &packed, v: &mut v, w: &mut w });
+                apply_at(level, Apply { m: &tiled, x: &mut x, w: &mut w });
+                let v = &x[..n];
+                assert!(x[n..].iter().all(|&p| p == 0.0), "n {n}, {level:?}: the padding stays zero");
                 let scale: f64 = rhs.iter().map(|x| x.abs()).fold(0.0, f64::max);
                 for i in 0..n {
                     let back: f64 = (0..n).map(|k| a(i, k) * v[k]).sum();
                     assert!(
-                        (back - rhs[i]).abs() < 1e-5 * scale,
+                        (back - rhs[i]).abs() < tolerance * scale,
                         "n {n}, {level:?}: row {i} gives {back} back for {}",
                         rhs[i]
                     );
                 }
                 let these: Vec<u64> = v.iter().map(|x| x.to_bits()).collect();
+                // (the public entry point pads and copies back the same bits)
+                let mut through = rhs.clone();
+                apply(&tiled, &mut through, &mut vec![0.0; 2 * padded(n)]);
+                assert!(level != crate::lanes::dispatched_level(SimdLevel::Avx2) || through == v, "n {n}: apply");
                 assert_eq!(*bits.get_or_insert(these.clone()), these, "{level:?} differs from the first level");
             }
         }

@@ -284,6 +284,12 @@ pub(crate) mod avx2 {
         /// # Safety
         /// AVX2 is available, `p[0..count]` is readable and `count < 8`.
         unsafe fn load_first(p: *const Self, count: usize) -> (__m256d, __m256d);
+
+        /// Values `p[0..4]` as `f64`.
+        ///
+        /// # Safety
+        /// AVX2 is available and `p[0..4]` is readable.
+        unsafe fn load4(p: *const Self) -> __m256d;
     }
 
     /// Lane masks: the last `8 - count` entries of `MASK[8 - count..]`
@@ -304,6 +310,11 @@ pub(crate) mod avx2 {
             let v = _mm256_maskload_ps(p, mask);
             (_mm256_cvtps_pd(_mm256_castps256_ps128(v)), _mm256_cvtps_pd(_mm256_extractf128_ps(v, 1)))
         }
+
+        #[inline(always)]
+        unsafe fn load4(p: *const f32) -> __m256d {
+            _mm256_cvtps_pd(_mm_loadu_ps(p))
+        }
     }
 
     impl Lanes for f64 {
@@ -317,6 +328,11 @@ pub(crate) mod avx2 {
             let low = _mm256_loadu_si256(MASK64.as_ptr().add(8 - count).cast());
             let high = _mm256_loadu_si256(MASK64.as_ptr().add(12 - count).cast());
             (_mm256_maskload_pd(p, low), _mm256_maskload_pd(p.add(4), high))
+        }
+
+        #[inline(always)]
+        unsafe fn load4(p: *const f64) -> __m256d {
+            _mm256_loadu_pd(p)
         }
     }
 

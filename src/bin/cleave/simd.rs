@@ -266,14 +266,16 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
         ms
     }));
 
-    // the coarse level's groups' blocks: 51 inverse factors of order 108
-    // (as on bunny_100k with its base clamped), each applied to a vector
-    let order = 108;
-    let factors: Vec<f32> = (0..51 * inverse_factor::packed_len(order)).map(|i| noise(i + 3) as f32).collect();
-    let (mut side, mut scratch) = (vec![0.0; order], vec![0.0; order]);
-    kernels.push(Kernel::one_lane("inverse factor apply", format!("51 blocks of order {order}"), move || {
+    // the coarse level's local blocks: 98 inverse factors of order 54 in
+    // f32 (as on bunny_100k with its base clamped), each applied to a
+    // vector
+    let order = 54;
+    let len = inverse_factor::tiled_len(order);
+    let factors: Vec<f32> = (0..98 * len).map(|i| noise(i + 3) as f32).collect();
+    let (mut side, mut scratch) = (vec![0.0; order], vec![0.0; 2 * inverse_factor::padded(order)]);
+    kernels.push(Kernel::one_lane("inverse factor apply", format!("98 blocks of order {order}"), move || {
         let (ms, ()) = best_ms(5 * scale, || {
-            for factor in factors.chunks_exact(inverse_factor::packed_len(order)) {
+            for factor in factors.chunks_exact(len) {
                 side.iter_mut().enumerate().for_each(|(i, v)| *v = noise(i));
                 inverse_factor::apply(factor, &mut side, &mut scratch);
             }
