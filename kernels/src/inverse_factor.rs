@@ -36,19 +36,19 @@ const TILE: usize = 4;
 /// The types a tiled inverse factor is stored in: `f32` (half the bytes,
 /// for a preconditioner's blocks) or `f64` (for a solve that must be exact
 /// to rounding).
-pub trait Packed: Value {
+pub trait Stored: Value {
     /// `x` rounded to the type.
     fn from_f64(x: f64) -> Self;
 }
 
-impl Packed for f32 {
+impl Stored for f32 {
     #[inline(always)]
     fn from_f64(x: f64) -> Self {
         x as f32
     }
 }
 
-impl Packed for f64 {
+impl Stored for f64 {
     #[inline(always)]
     fn from_f64(x: f64) -> Self {
         x
@@ -70,7 +70,7 @@ pub fn tiled_len(n: usize) -> usize {
 /// Stores the lower triangle of the column-major `n x n` matrix `dense`
 /// in `tiled` (at least [`tiled_len`]`(n)` long, see module docs), rounded
 /// to `T`.
-pub fn tile<T: Packed>(dense: &[f64], n: usize, tiled: &mut [T]) {
+pub fn tile<T: Stored>(dense: &[f64], n: usize, tiled: &mut [T]) {
     let tiles = n.div_ceil(TILE);
     let mut at = 0;
     for c in 0..tiles {
@@ -89,7 +89,7 @@ pub fn tile<T: Packed>(dense: &[f64], n: usize, tiled: &mut [T]) {
 
 /// `v = Mᵀ (M v)` for the tiled inverse factor `m` of order `v.len()`;
 /// `scratch` (at least `2 `[`padded`]`(v.len())` long) is overwritten.
-pub fn apply<T: Packed>(m: &[T], v: &mut [f64], scratch: &mut [f64]) {
+pub fn apply<T: Stored>(m: &[T], v: &mut [f64], scratch: &mut [f64]) {
     let n = v.len();
     assert_eq!(m.len(), tiled_len(n), "a tiled inverse factor of the vector's order");
     assert!(scratch.len() >= 2 * padded(n), "scratch of twice the padded order");
@@ -102,7 +102,7 @@ pub fn apply<T: Packed>(m: &[T], v: &mut [f64], scratch: &mut [f64]) {
 
 /// [`apply`] on the padded vector `x` at the instruction set `level`: the
 /// generic kernel for scalar, [`avx2::apply`] at AVX2 and above.
-fn apply_at<T: Packed>(level: SimdLevel, operands: Apply<'_, T>) {
+fn apply_at<T: Stored>(level: SimdLevel, operands: Apply<'_, T>) {
     #[cfg(target_arch = "x86_64")]
     if level != SimdLevel::Scalar {
         let Apply { m, x, w } = operands;
@@ -124,7 +124,7 @@ struct Apply<'a, T> {
     w: &'a mut [f64],
 }
 
-impl<T: Packed> pulp::WithSimd for Apply<'_, T> {
+impl<T: Stored> pulp::WithSimd for Apply<'_, T> {
     type Output = ();
 
     #[inline(always)]
@@ -233,7 +233,7 @@ mod tests {
         inverts_on_every_level::<f64>(1e-12);
     }
 
-    fn inverts_on_every_level<T: Packed + Default>(tolerance: f64) {
+    fn inverts_on_every_level<T: Stored + Default>(tolerance: f64) {
         for n in [1, 3, 4, 5, 7, 8, 11, 30, 53, 54, 108] {
             // A = B Bᵀ + n I
             let b = |i: usize, j: usize| ((i * 7 + j * 3) % 5) as f64 - 2.0;

@@ -182,7 +182,7 @@ pub(super) struct AggregateCycle {
     local: Vec<LocalBlock>,
     /// The diagonal blocks of `A₂ = Tᵀ A₁ T`, one per component, each
     /// dense (column-major) and overwritten by its lower Cholesky factor,
-    /// laid end to end.
+    /// laid end to end (the factors' inverses below serve the solves).
     factor: Vec<f64>,
     /// The inverse of each component's factor, tiled (in `f64`: the
     /// groups' solve stays exact to rounding), laid end to end; the dense
@@ -330,13 +330,7 @@ impl AggregateCycle {
                 if let Err(llt::factor::LltError::NonPositivePivot { index }) = factored {
                     return Some(members[index / k] as usize);
                 }
-                let inverse = &mut block.inverse[..n * n];
-                invert_lower_triangular(
-                    MatMut::from_column_major_slice_mut(inverse, n, n),
-                    MatRef::from_column_major_slice(dense, n, n),
-                    Par::Seq,
-                );
-                inverse_factor::tile(inverse, n, &mut block.factor);
+                tile_inverse(dense, n, &mut block.inverse, &mut block.factor);
                 None
             })
             .min();
@@ -391,13 +385,7 @@ impl AggregateCycle {
                 result = Err(NotPositive { aggregate: self.members[self.ptr[group] as usize] as usize });
                 break;
             }
-            let square = &mut dense_inverse[..n * n];
-            invert_lower_triangular(
-                MatMut::from_column_major_slice_mut(square, n, n),
-                MatRef::from_column_major_slice(block, n, n),
-                Par::Seq,
-            );
-            inverse_factor::tile(square, n, tiles);
+            tile_inverse(block, n, &mut dense_inverse, tiles);
         }
         (self.inverse, self.dense_inverse) = (inverse, dense_inverse);
         self.factor = dense;
@@ -596,6 +584,19 @@ fn number_by_component(graph: (&[u32], &[u32]), of: &mut [u32], groups: usize) -
 }
 
 /// Scratch of the dense Cholesky factor of order `n`.
+/// The inverse of the lower Cholesky factor `factor` (column-major, order
+/// `n`) into `tiled` ([`inverse_factor::tile`]), made in `square` (at least
+/// `n²` long).
+fn tile_inverse<T: inverse_factor::Stored>(factor: &[f64], n: usize, square: &mut [f64], tiled: &mut [T]) {
+    let square = &mut square[..n * n];
+    invert_lower_triangular(
+        MatMut::from_column_major_slice_mut(square, n, n),
+        MatRef::from_column_major_slice(&factor[..n * n], n, n),
+        Par::Seq,
+    );
+    inverse_factor::tile(square, n, tiled);
+}
+
 fn cholesky_scratch(n: usize) -> faer::dyn_stack::StackReq {
     llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default())
 }
