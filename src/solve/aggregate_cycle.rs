@@ -180,9 +180,10 @@ pub(super) struct AggregateCycle {
     /// when the groups are made, so that a factor or a solve allocates
     /// nothing.
     local: Vec<LocalBlock>,
-    /// The diagonal blocks of `A₂ = Tᵀ A₁ T`, one per component, each
-    /// dense (column-major) and overwritten by its lower Cholesky factor,
-    /// laid end to end (the factors' inverses below serve the solves).
+    /// A diagonal block of `A₂ = Tᵀ A₁ T` (one per component, dense,
+    /// column-major), overwritten by its lower Cholesky factor, whose
+    /// inverse below serves the solves: room for the largest component,
+    /// reused component by component.
     factor: Vec<f64>,
     /// The inverse of each component's factor, tiled (in `f64`: the
     /// groups' solve stays exact to rounding), laid end to end; the dense
@@ -341,14 +342,14 @@ impl AggregateCycle {
     }
 
     /// `A₂ = Tᵀ A₁ T`, a dense block per component (the group columns of a
-    /// large one in parallel), and the Cholesky factor of each block.
+    /// large one in parallel), the Cholesky factor of each block and its
+    /// tiled inverse.
     fn factor_groups(&mut self, a1: &AggregateMatrix, rotations: bool) -> Result<(), NotPositive> {
         let k = a1.k;
         let order = |groups: &std::ops::Range<usize>| k * groups.len();
-        let total: usize = self.components().map(|c| order(&c).pow(2)).sum();
         let largest = self.components().map(|c| order(&c)).max().unwrap_or(0);
         let mut dense = std::mem::take(&mut self.factor);
-        dense.resize(total, 0.0);
+        dense.resize(largest * largest, 0.0);
         let mut stack = self.stack.take().unwrap_or_else(|| MemBuffer::new(cholesky_scratch(largest)));
         if stack.len() < cholesky_scratch(largest).size_bytes() {
             stack = MemBuffer::new(cholesky_scratch(largest));
@@ -360,11 +361,10 @@ impl AggregateCycle {
         dense_inverse.resize(largest * largest, 0.0);
         self.scratch.resize(2 * padded(largest), 0.0);
         let mut result = Ok(());
-        let (mut rest, mut tiled_rest) = (&mut dense[..], &mut inverse[..]);
+        let mut tiled_rest = &mut inverse[..];
         for groups in self.components() {
             let n = order(&groups);
-            let (block, after) = rest.split_at_mut(n * n);
-            rest = after;
+            let block = &mut dense[..n * n];
             let (tiles, after) = tiled_rest.split_at_mut(tiled_len(n));
             tiled_rest = after;
             let column = |(g, cols): (usize, &mut [f64])| self.assemble_group(a1, rotations, &groups, g, cols);
