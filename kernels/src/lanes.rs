@@ -41,23 +41,31 @@ pub trait Real:
     /// `(x, self)`. Range reduction to `t = min / max ∈ [0, 1]`, then
     /// `atan(t)` as `π/4 + atan((t - 1) / (t + 1))` above 0.66, by Cephes'
     /// rational function (relative error below 4e-16, tested against `std`).
+    /// The reduced argument takes one division, `(min - max) / (min + max)`
+    /// or `min / max` chosen before it; the numerator and denominator
+    /// polynomials are split in halves in `z²` (Estrin), so the chain of
+    /// dependent operations is short: a mean value basis evaluates an
+    /// arctangent per edge and point, and waited on this chain.
     #[inline(always)]
     fn atan2_upper(self, x: Self) -> Self {
         let ax = x.abs();
         let lo = self.min(ax);
         let hi = self.max(ax);
-        let t = lo / hi.max(self.constant(f64::MIN_POSITIVE));
-        let big = self.constant(0.66).select_less(t, self.constant(1.0), self.constant(0.0)); // 1 where t > 0.66
-        let tr = big.mul_add((t - self.constant(1.0)) / (t + self.constant(1.0)) - t, t);
+        let (zero, one) = (self.constant(0.0), self.constant(1.0));
+        // 1 where min / max > 0.66
+        let big = (self.constant(0.66) * hi).select_less(lo, one, zero);
+        let num = big.mul_add(zero - hi, lo);
+        let den = big.mul_add(lo, hi).max(self.constant(f64::MIN_POSITIVE));
+        let tr = num / den;
         let z = tr * tr;
-        let mut p = self.constant(ATAN_P[0]);
-        for &k in &ATAN_P[1..] {
-            p = p.mul_add(z, self.constant(k));
-        }
-        let mut q = z + self.constant(ATAN_Q[0]);
-        for &k in &ATAN_Q[1..] {
-            q = q.mul_add(z, self.constant(k));
-        }
+        let z2 = z * z;
+        let c = |k: f64| self.constant(k);
+        // p = P0 z⁴ + P1 z³ + P2 z² + P3 z + P4
+        let p = (c(ATAN_P[0]).mul_add(z, c(ATAN_P[1]))).mul_add(z2, c(ATAN_P[2]).mul_add(z, c(ATAN_P[3])));
+        let p = p.mul_add(z, c(ATAN_P[4]));
+        // q = z⁵ + Q0 z⁴ + Q1 z³ + Q2 z² + Q3 z + Q4
+        let q = (z + c(ATAN_Q[0])).mul_add(z2, c(ATAN_Q[1]).mul_add(z, c(ATAN_Q[2])));
+        let q = q.mul_add(z2, c(ATAN_Q[3]).mul_add(z, c(ATAN_Q[4])));
         let r = tr.mul_add(z * p / q, tr);
         // + π/4 (with the low-order part of π/4) where reduced
         let a = big

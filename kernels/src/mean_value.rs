@@ -16,7 +16,9 @@
 //! `λ_a = (m · n_bc) / (u_a · n_bc)` (and cyclically). The weights are
 //! `w_j = Σ_{triangles ∋ j} λ_j / d_j` and the shape functions
 //! `φ_j = w_j / Σ_l w_l`. Reversing every triangle flips the sign of every
-//! `w_j` and leaves `φ_j` unchanged.
+//! `w_j` and leaves `φ_j` unchanged; so does any common factor, and the
+//! evaluation takes `2 m` for `m` (one multiplication of dual numbers less
+//! per coordinate and triangle).
 //!
 //! Gradients `∇φ_j` (1/m) come from forward dual numbers carried through the
 //! same arithmetic (the printed gradient formulas of wicke2007, eq. 20-21,
@@ -56,11 +58,24 @@ fn dot<R: Real>(a: [R; 3], b: [R; 3]) -> R {
 /// Unit normal of the great circle through unit vectors `a`, `b` and the
 /// arc angle between them.
 #[inline(always)]
-fn arc<R: Real>(a: [R; 3], b: [R; 3]) -> ([R; 3], R) {
-    let c = cross(a, b);
-    let s = dot(c, c).sqrt();
-    let inv = s.constant(1.0) / s;
-    ([c[0] * inv, c[1] * inv, c[2] * inv], s.atan2_upper(dot(a, b)))
+fn arc<R: Real>(a: [Dual<R>; 3], b: [Dual<R>; 3]) -> ([Dual<R>; 3], Dual<R>) {
+    let (n, s) = unit_and_length(cross(a, b));
+    (n, s.atan2_upper(dot(a, b)))
+}
+
+/// `c / |c|` and `|c|` with one division: `ρ = 1 / |c|` gives the
+/// length's gradient `∇|c| = ρ ∇(c · c) / 2` and the reciprocal's
+/// `∇ρ = -ρ² ∇|c|`.
+#[inline(always)]
+fn unit_and_length<R: Real>(c: [Dual<R>; 3]) -> ([Dual<R>; 3], Dual<R>) {
+    let q = dot(c, c);
+    let s = q.v.sqrt();
+    let rho = s.constant(1.0) / s;
+    let half_rho = s.constant(0.5) * rho;
+    let length = Dual { v: s, d: [q.d[0] * half_rho, q.d[1] * half_rho, q.d[2] * half_rho] };
+    let minus_rho2 = s.constant(0.0) - rho * rho;
+    let inv = Dual { v: rho, d: [length.d[0] * minus_rho2, length.d[1] * minus_rho2, length.d[2] * minus_rho2] };
+    ([c[0] * inv, c[1] * inv, c[2] * inv], length)
 }
 
 /// Marks an arc that runs against its edge's stored direction.
@@ -125,20 +140,16 @@ fn arc_of<R: Real>(code: u32, normals: &[[Dual<R>; 3]], angles: &[Dual<R>]) -> (
     (if code & FLIPPED == 0 { n } else { [-n[0], -n[1], -n[2]] }, angles[e])
 }
 
-/// Mean value weights `w_j` (with gradients) at `x` into `work.w`. Every
+/// Mean value weights `2 w_j` (with gradients) at `x` into `work.w`. Every
 /// helper is `#[inline(always)]` so that the SIMD instruction set chosen at
 /// run time reaches all of the arithmetic.
 #[inline(always)]
 fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 3], work: &mut Work<R>) {
     let Work { ends, arcs, edges, u, d, w, normals, angles } = work;
     let zero = x[0].constant(0.0);
-    let half = x[0].constant(0.5);
     for (j, p) in vertices.iter().enumerate() {
         let r = [x[0].constant(p[0]) - x[0], x[1].constant(p[1]) - x[1], x[2].constant(p[2]) - x[2]];
-        let len = dot(r, r).sqrt();
-        let inv = len.constant(1.0) / len;
-        u[j] = [r[0] * inv, r[1] * inv, r[2] * inv];
-        d[j] = len;
+        (u[j], d[j]) = unit_and_length(r);
         w[j] = zero;
     }
     for (e, &[i, j]) in ends[..*edges].iter().enumerate() {
@@ -151,9 +162,9 @@ fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 
         let (n_ca, b_ca) = arc_of(codes[1], normals, angles);
         let (n_ab, b_ab) = arc_of(codes[2], normals, angles);
         let m = [
-            half * (b_bc * n_bc[0] + b_ca * n_ca[0] + b_ab * n_ab[0]),
-            half * (b_bc * n_bc[1] + b_ca * n_ca[1] + b_ab * n_ab[1]),
-            half * (b_bc * n_bc[2] + b_ca * n_ca[2] + b_ab * n_ab[2]),
+            b_bc * n_bc[0] + b_ca * n_ca[0] + b_ab * n_ab[0],
+            b_bc * n_bc[1] + b_ca * n_ca[1] + b_ab * n_ab[1],
+            b_bc * n_bc[2] + b_ca * n_ca[2] + b_ab * n_ab[2],
         ];
         w[ia] = w[ia] + dot(m, n_bc) / (dot(ua, n_bc) * d[ia]);
         w[ib] = w[ib] + dot(m, n_ca) / (dot(ub, n_ca) * d[ib]);
@@ -308,18 +319,12 @@ mod tests {
     }
 
     /// The weights with each triangle computing its own three arcs (the
-    /// plain form of the formula in the module docs), on `f64` duals.
+    /// plain form of the formula in the module docs, with its `½`), on
+    /// `f64` duals, times 2 (exactly).
     fn weights_per_triangle(v: &[[f64; 3]], t: &[[u32; 3]], p: [f64; 3]) -> Vec<Dual<f64>> {
         let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
-        let (u, d): (Vec<[Dual<f64>; 3]>, Vec<Dual<f64>>) = v
-            .iter()
-            .map(|q| {
-                let r: [Dual<f64>; 3] = std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]);
-                let len = dot(r, r).sqrt();
-                let inv = Dual::constant_of(1.0) / len;
-                (r.map(|c| c * inv), len)
-            })
-            .unzip();
+        let (u, d): (Vec<[Dual<f64>; 3]>, Vec<Dual<f64>>) =
+            v.iter().map(|q| unit_and_length(std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]))).unzip();
         let mut w = vec![Dual::constant_of(0.0); v.len()];
         let half = Dual::constant_of(0.5);
         for t in t {
@@ -330,11 +335,13 @@ mod tests {
             w[b] = w[b] + dot(m, n_ca) / (dot(u[b], n_ca) * d[b]);
             w[c] = w[c] + dot(m, n_ab) / (dot(u[c], n_ab) * d[c]);
         }
-        w
+        let two = Dual::constant_of(2.0);
+        w.into_iter().map(|w| two * w).collect()
     }
 
     /// Arcs computed once per edge, the reversed ones negated, give the
-    /// bits of every triangle computing its own.
+    /// bits of every triangle computing its own (and `2 m` those of `m`,
+    /// doubled).
     #[test]
     fn arcs_per_edge_give_the_bits_of_arcs_per_triangle() {
         let (v, t) = element();
