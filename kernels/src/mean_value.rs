@@ -18,7 +18,8 @@
 //! `φ_j = w_j / Σ_l w_l`. Reversing every triangle flips the sign of every
 //! `w_j` and leaves `φ_j` unchanged; so does any common factor, and the
 //! evaluation takes `2 m` for `m` (one multiplication of dual numbers less
-//! per coordinate and triangle).
+//! per coordinate and triangle). It forms `λ_a / d_a` as `(m · n_bc) /
+//! ((x_a - x) · n_bc)`, the offset's gradient `-I` applied directly.
 //!
 //! Gradients `∇φ_j` (1/m) come from forward dual numbers carried through the
 //! same arithmetic (the printed gradient formulas of wicke2007, eq. 20-21,
@@ -78,6 +79,16 @@ fn unit_and_length<R: Real>(c: [Dual<R>; 3]) -> ([Dual<R>; 3], Dual<R>) {
     ([c[0] * inv, c[1] * inv, c[2] * inv], length)
 }
 
+/// `r · n` for the offset `r = x_j - x` of a vertex from the point (its
+/// gradient `-I`): `∇(r · n) = (∇n)ᵀ r - n`, without carrying the offset's
+/// constant gradient through a product of dual numbers.
+#[inline(always)]
+fn offset_dot<R: Real>(r: [R; 3], n: [Dual<R>; 3]) -> Dual<R> {
+    let v = r[0] * n[0].v + r[1] * n[1].v + r[2] * n[2].v;
+    let d = |k: usize| r[0] * n[0].d[k] + r[1] * n[1].d[k] + r[2] * n[2].d[k] - n[k].v;
+    Dual { v, d: [d(0), d(1), d(2)] }
+}
+
 /// Marks an arc that runs against its edge's stored direction.
 const FLIPPED: u32 = 1 << 31;
 
@@ -87,14 +98,15 @@ const FLIPPED: u32 = 1 << 31;
 /// triangle, numbered through a `k x k` table of directed pairs that
 /// [`Work::new`] keeps only while it lists them), per triangle its
 /// arcs `b→c`, `c→a`, `a→b` as edge numbers ([`FLIPPED`] set where the arc
-/// runs against its edge); and the per-point arrays: `u`, `d`, `w` per
-/// vertex (`w` the output of [`weights`]), `normals`, `angles` per edge.
+/// runs against its edge); and the per-point arrays: `u`, the offsets
+/// `x_j - x` (values only) and `w` per vertex (`w` the output of
+/// [`weights`]), `normals`, `angles` per edge.
 struct Work<'s, R> {
     ends: DynArray<'s, [u32; 2]>,
     arcs: DynArray<'s, [u32; 3]>,
     edges: usize,
     u: DynArray<'s, [Dual<R>; 3]>,
-    d: DynArray<'s, Dual<R>>,
+    offsets: DynArray<'s, [R; 3]>,
     w: DynArray<'s, Dual<R>>,
     normals: DynArray<'s, [Dual<R>; 3]>,
     angles: DynArray<'s, Dual<R>>,
@@ -123,11 +135,11 @@ impl<'s, R: Real> Work<'s, R> {
         }
         let z = Dual::constant_of(zero);
         let (u, stack) = stack.make_with(k, |_| [z; 3]);
-        let (d, stack) = stack.make_with(k, |_| z);
+        let (offsets, stack) = stack.make_with(k, |_| [zero; 3]);
         let (w, stack) = stack.make_with(k, |_| z);
         let (normals, stack) = stack.make_with(edges, |_| [z; 3]);
         let (angles, _) = stack.make_with(edges, |_| z);
-        Work { ends, arcs, edges, u, d, w, normals, angles }
+        Work { ends, arcs, edges, u, offsets, w, normals, angles }
     }
 }
 
@@ -145,11 +157,12 @@ fn arc_of<R: Real>(code: u32, normals: &[[Dual<R>; 3]], angles: &[Dual<R>]) -> (
 /// run time reaches all of the arithmetic.
 #[inline(always)]
 fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 3], work: &mut Work<R>) {
-    let Work { ends, arcs, edges, u, d, w, normals, angles } = work;
+    let Work { ends, arcs, edges, u, offsets, w, normals, angles } = work;
     let zero = x[0].constant(0.0);
     for (j, p) in vertices.iter().enumerate() {
         let r = [x[0].constant(p[0]) - x[0], x[1].constant(p[1]) - x[1], x[2].constant(p[2]) - x[2]];
-        (u[j], d[j]) = unit_and_length(r);
+        (u[j], _) = unit_and_length(r);
+        offsets[j] = [r[0].v, r[1].v, r[2].v];
         w[j] = zero;
     }
     for (e, &[i, j]) in ends[..*edges].iter().enumerate() {
@@ -157,7 +170,6 @@ fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 
     }
     for (t, codes) in triangles.iter().zip(arcs.iter()) {
         let (ia, ib, ic) = (t[0] as usize, t[1] as usize, t[2] as usize);
-        let (ua, ub, uc) = (u[ia], u[ib], u[ic]);
         let (n_bc, b_bc) = arc_of(codes[0], normals, angles);
         let (n_ca, b_ca) = arc_of(codes[1], normals, angles);
         let (n_ab, b_ab) = arc_of(codes[2], normals, angles);
@@ -166,9 +178,9 @@ fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 
             b_bc * n_bc[1] + b_ca * n_ca[1] + b_ab * n_ab[1],
             b_bc * n_bc[2] + b_ca * n_ca[2] + b_ab * n_ab[2],
         ];
-        w[ia] = w[ia] + dot(m, n_bc) / (dot(ua, n_bc) * d[ia]);
-        w[ib] = w[ib] + dot(m, n_ca) / (dot(ub, n_ca) * d[ib]);
-        w[ic] = w[ic] + dot(m, n_ab) / (dot(uc, n_ab) * d[ic]);
+        w[ia] = w[ia] + dot(m, n_bc) / offset_dot(offsets[ia], n_bc);
+        w[ib] = w[ib] + dot(m, n_ca) / offset_dot(offsets[ib], n_ca);
+        w[ic] = w[ic] + dot(m, n_ab) / offset_dot(offsets[ic], n_ab);
     }
 }
 
@@ -323,17 +335,19 @@ mod tests {
     /// `f64` duals, times 2 (exactly).
     fn weights_per_triangle(v: &[[f64; 3]], t: &[[u32; 3]], p: [f64; 3]) -> Vec<Dual<f64>> {
         let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
-        let (u, d): (Vec<[Dual<f64>; 3]>, Vec<Dual<f64>>) =
-            v.iter().map(|q| unit_and_length(std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i]))).unzip();
+        let offsets: Vec<[Dual<f64>; 3]> =
+            v.iter().map(|q| std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i])).collect();
+        let u: Vec<[Dual<f64>; 3]> = offsets.iter().map(|&r| unit_and_length(r).0).collect();
+        let r: Vec<[f64; 3]> = offsets.iter().map(|r| r.map(|c| c.v)).collect();
         let mut w = vec![Dual::constant_of(0.0); v.len()];
         let half = Dual::constant_of(0.5);
         for t in t {
             let [a, b, c] = t.map(|i| i as usize);
             let [(n_bc, b_bc), (n_ca, b_ca), (n_ab, b_ab)] = [arc(u[b], u[c]), arc(u[c], u[a]), arc(u[a], u[b])];
             let m: [Dual<f64>; 3] = std::array::from_fn(|i| half * (b_bc * n_bc[i] + b_ca * n_ca[i] + b_ab * n_ab[i]));
-            w[a] = w[a] + dot(m, n_bc) / (dot(u[a], n_bc) * d[a]);
-            w[b] = w[b] + dot(m, n_ca) / (dot(u[b], n_ca) * d[b]);
-            w[c] = w[c] + dot(m, n_ab) / (dot(u[c], n_ab) * d[c]);
+            w[a] = w[a] + dot(m, n_bc) / offset_dot(r[a], n_bc);
+            w[b] = w[b] + dot(m, n_ca) / offset_dot(r[b], n_ca);
+            w[c] = w[c] + dot(m, n_ab) / offset_dot(r[c], n_ab);
         }
         let two = Dual::constant_of(2.0);
         w.into_iter().map(|w| two * w).collect()
