@@ -19,7 +19,8 @@
 //! `w_j` and leaves `φ_j` unchanged; so does any common factor, and the
 //! evaluation takes `2 m` for `m` (one multiplication of dual numbers less
 //! per coordinate and triangle). It forms `λ_a / d_a` as `(m · n_bc) /
-//! ((x_a - x) · n_bc)`, the offset's gradient `-I` applied directly.
+//! ((x_a - x) · n_bc)`, and `u_j` from `x_j - x`, the offset's gradient
+//! `-I` applied directly instead of carried through dual products.
 //!
 //! Gradients `∇φ_j` (1/m) come from forward dual numbers carried through the
 //! same arithmetic (the printed gradient formulas of wicke2007, eq. 20-21,
@@ -77,6 +78,24 @@ fn unit_and_length<R: Real>(c: [Dual<R>; 3]) -> ([Dual<R>; 3], Dual<R>) {
     let minus_rho2 = s.constant(0.0) - rho * rho;
     let inv = Dual { v: rho, d: [length.d[0] * minus_rho2, length.d[1] * minus_rho2, length.d[2] * minus_rho2] };
     ([c[0] * inv, c[1] * inv, c[2] * inv], length)
+}
+
+/// `r / |r|` for the offset `r = x_j - x` of a vertex from the point, with
+/// its gradient `∂(r_i / |r|) / ∂x_k = (u_i u_k - δ_ik) / |r|`.
+#[inline(always)]
+fn unit_offset<R: Real>(r: [R; 3]) -> [Dual<R>; 3] {
+    let s = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+    let rho = s.constant(1.0) / s;
+    let u = [r[0] * rho, r[1] * rho, r[2] * rho];
+    // (written out: a closure the compiler does not inline runs without
+    // the instruction set chosen at run time, and took twice the time)
+    let w = [u[0] * rho, u[1] * rho, u[2] * rho];
+    let (u01, u02, u12) = (u[0] * w[1], u[0] * w[2], u[1] * w[2]);
+    [
+        Dual { v: u[0], d: [u[0] * w[0] - rho, u01, u02] },
+        Dual { v: u[1], d: [u01, u[1] * w[1] - rho, u12] },
+        Dual { v: u[2], d: [u02, u12, u[2] * w[2] - rho] },
+    ]
 }
 
 /// `r · n` for the offset `r = x_j - x` of a vertex from the point (its
@@ -160,9 +179,9 @@ fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 
     let Work { ends, arcs, edges, u, offsets, w, normals, angles } = work;
     let zero = x[0].constant(0.0);
     for (j, p) in vertices.iter().enumerate() {
-        let r = [x[0].constant(p[0]) - x[0], x[1].constant(p[1]) - x[1], x[2].constant(p[2]) - x[2]];
-        (u[j], _) = unit_and_length(r);
-        offsets[j] = [r[0].v, r[1].v, r[2].v];
+        let r = [x[0].v.constant(p[0]) - x[0].v, x[1].v.constant(p[1]) - x[1].v, x[2].v.constant(p[2]) - x[2].v];
+        u[j] = unit_offset(r);
+        offsets[j] = r;
         w[j] = zero;
     }
     for (e, &[i, j]) in ends[..*edges].iter().enumerate() {
@@ -334,11 +353,8 @@ mod tests {
     /// plain form of the formula in the module docs, with its `½`), on
     /// `f64` duals, times 2 (exactly).
     fn weights_per_triangle(v: &[[f64; 3]], t: &[[u32; 3]], p: [f64; 3]) -> Vec<Dual<f64>> {
-        let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
-        let offsets: Vec<[Dual<f64>; 3]> =
-            v.iter().map(|q| std::array::from_fn(|i| Dual::constant_of(q[i]) - x[i])).collect();
-        let u: Vec<[Dual<f64>; 3]> = offsets.iter().map(|&r| unit_and_length(r).0).collect();
-        let r: Vec<[f64; 3]> = offsets.iter().map(|r| r.map(|c| c.v)).collect();
+        let r: Vec<[f64; 3]> = v.iter().map(|q| std::array::from_fn(|i| q[i] - p[i])).collect();
+        let u: Vec<[Dual<f64>; 3]> = r.iter().map(|&r| unit_offset(r)).collect();
         let mut w = vec![Dual::constant_of(0.0); v.len()];
         let half = Dual::constant_of(0.5);
         for t in t {
