@@ -104,8 +104,12 @@ fn unit_offset<R: Real>(r: [R; 3]) -> [Dual<R>; 3] {
 #[inline(always)]
 fn offset_dot<R: Real>(r: [R; 3], n: [Dual<R>; 3]) -> Dual<R> {
     let v = r[0] * n[0].v + r[1] * n[1].v + r[2] * n[2].v;
-    let d = |k: usize| r[0] * n[0].d[k] + r[1] * n[1].d[k] + r[2] * n[2].d[k] - n[k].v;
-    Dual { v, d: [d(0), d(1), d(2)] }
+    let d = [
+        r[0] * n[0].d[0] + r[1] * n[1].d[0] + r[2] * n[2].d[0] - n[0].v,
+        r[0] * n[0].d[1] + r[1] * n[1].d[1] + r[2] * n[2].d[1] - n[1].v,
+        r[0] * n[0].d[2] + r[1] * n[1].d[2] + r[2] * n[2].d[2] - n[2].v,
+    ];
+    Dual { v, d }
 }
 
 /// Marks an arc that runs against its edge's stored direction.
@@ -171,15 +175,15 @@ fn arc_of<R: Real>(code: u32, normals: &[[Dual<R>; 3]], angles: &[Dual<R>]) -> (
     (if code & FLIPPED == 0 { n } else { [-n[0], -n[1], -n[2]] }, angles[e])
 }
 
-/// Mean value weights `2 w_j` (with gradients) at `x` into `work.w`. Every
-/// helper is `#[inline(always)]` so that the SIMD instruction set chosen at
-/// run time reaches all of the arithmetic.
+/// Mean value weights `2 w_j` at `x`, with their gradients with respect
+/// to `x`, into `work.w`. Every helper is `#[inline(always)]` so that the
+/// SIMD instruction set chosen at run time reaches all of the arithmetic.
 #[inline(always)]
-fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 3], work: &mut Work<R>) {
+fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [R; 3], work: &mut Work<R>) {
     let Work { ends, arcs, edges, u, offsets, w, normals, angles } = work;
-    let zero = x[0].constant(0.0);
+    let zero = Dual::constant_of(x[0].constant(0.0));
     for (j, p) in vertices.iter().enumerate() {
-        let r = [x[0].v.constant(p[0]) - x[0].v, x[1].v.constant(p[1]) - x[1].v, x[2].v.constant(p[2]) - x[2].v];
+        let r = [x[0].constant(p[0]) - x[0], x[1].constant(p[1]) - x[1], x[2].constant(p[2]) - x[2]];
         u[j] = unit_offset(r);
         offsets[j] = r;
         w[j] = zero;
@@ -205,7 +209,7 @@ fn weights<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 
 
 /// `φ_j` and `∇φ_j` at `x` into `work.w` (normalised in place).
 #[inline(always)]
-fn shape_functions<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [Dual<R>; 3], work: &mut Work<R>) {
+fn shape_functions<R: Real>(vertices: &[[f64; 3]], triangles: &[[u32; 3]], x: [R; 3], work: &mut Work<R>) {
     weights(vertices, triangles, x, work);
     let w = &mut *work.w;
     let mut sum = w[0];
@@ -257,8 +261,7 @@ pub fn evaluate_scalar(
     check_layout(k, triangles, nq, phi, grad);
     let mut work = Work::new(stack, k, triangles, 0.0);
     for (q, p) in points.iter().enumerate() {
-        let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
-        shape_functions(vertices, triangles, x, &mut work);
+        shape_functions(vertices, triangles, *p, &mut work);
         for (a, wa) in work.w.iter().enumerate() {
             phi[a * nq + q] = wa.v;
             for i in 0..3 {
@@ -288,7 +291,6 @@ impl pulp::WithSimd for Evaluate<'_> {
         let mut work = Work::new(stack, k, triangles, Lanes::splat(simd, 0.0));
         for q0 in (0..nq).step_by(width) {
             let (x, n) = Lanes::load_points(simd, points, q0);
-            let x: [Dual<Lanes<S>>; 3] = std::array::from_fn(|i| Dual::variable(x[i], i));
             shape_functions(vertices, triangles, x, &mut work);
             for (a, wa) in work.w.iter().enumerate() {
                 wa.v.store(&mut phi[a * nq + q0..a * nq + q0 + n]);
@@ -378,10 +380,9 @@ mod tests {
         let mut buf = dyn_stack::MemBuffer::new(evaluate_scratch(v.len(), t.len()));
         for i in 0..23 {
             let p = [0.05 + 0.04 * i as f64, 0.9 - 0.035 * i as f64, 0.1 + 0.037 * i as f64];
-            let x = [Dual::variable(p[0], 0), Dual::variable(p[1], 1), Dual::variable(p[2], 2)];
             let mut work = Work::new(MemStack::new(&mut buf), v.len(), &t, 0.0);
             assert_eq!(work.edges, 3 * v.len() - 6, "a closed surface's edges, each once");
-            weights(&v, &t, x, &mut work);
+            weights(&v, &t, p, &mut work);
             for (a, (per_edge, per_triangle)) in work.w.iter().zip(weights_per_triangle(&v, &t, p)).enumerate() {
                 let bits = |w: &Dual<f64>| [w.v, w.d[0], w.d[1], w.d[2]].map(f64::to_bits);
                 assert_eq!(bits(per_edge), bits(&per_triangle), "weight {a} at {p:?}");
