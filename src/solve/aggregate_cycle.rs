@@ -583,7 +583,6 @@ fn number_by_component(graph: (&[u32], &[u32]), of: &mut [u32], groups: usize) -
     firsts.chain(std::iter::once(groups as u32)).collect()
 }
 
-/// Scratch of the dense Cholesky factor of order `n`.
 /// The inverse of the lower Cholesky factor `factor` (column-major, order
 /// `n`) into `tiled` ([`inverse_factor::tile`]), made in `square` (at least
 /// `n²` long).
@@ -597,6 +596,7 @@ fn tile_inverse<T: inverse_factor::Stored>(factor: &[f64], n: usize, square: &mu
     inverse_factor::tile(square, n, tiled);
 }
 
+/// Scratch of the dense Cholesky factor of order `n`.
 fn cholesky_scratch(n: usize) -> faer::dyn_stack::StackReq {
     llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default())
 }
