@@ -33,8 +33,9 @@
 //! next column reads again cost more than the bytes saved.
 //!
 //! The iteration runs in the solver's own numbering of the blocks, a
-//! reverse Cuthill–McKee order of the block graph made once per pattern
-//! (`ordering.rs`): the values are carried into it as they are rounded, the
+//! reverse Cuthill–McKee order of the block graph (or the mesh's own, as
+//! local), the blocks a cut appends numbered after it (`ordering.rs`):
+//! the values are carried into it as they are rounded, the
 //! right-hand side and the guess on entry, the solution back on exit. A
 //! mesh numbered as its file numbers it makes the product gather from all
 //! over the vector; on bunny_100k (2 cores, AMD EPYC) the renumbering took
@@ -49,7 +50,7 @@ use rayon::prelude::*;
 
 use super::coarse::{aggregate_limit, CoarseSpace, Correction};
 use super::history::{ProjectionSums, SolutionHistory};
-use super::ordering::{Along, Renumbering};
+use super::ordering::{anchored_order, Along, Renumbering};
 use super::{Cholesky, LinearSolver, SolveError, SolveStats, SystemPattern};
 
 /// Chunk length of the deterministic reductions.
@@ -1149,7 +1150,10 @@ impl ConjugateGradient {
         // coarse level, and takes the new reference before a solve)
         let limit = aggregate_limit(blocks.values_len());
         let old = self.coarse.take().unwrap_or_default();
-        self.coarse = self.rest.is_none().then(|| CoarseSpace::renew(blocks, limit, CHUNK_BLOCKS, old));
+        self.coarse = self.rest.is_none().then(|| {
+            let visit = anchored_order(blocks, self.numbering.analysed());
+            CoarseSpace::renew(blocks, &visit, limit, CHUNK_BLOCKS, old)
+        });
         self.coarse_age = CoarseAge::default();
         self.positions.clear();
         if let Some(rest) = self.rest.as_mut() {

@@ -86,7 +86,8 @@ pub(super) struct CoarseSpace {
     /// Blocks per chunk of a restriction, the first aggregate of each
     /// chunk's blocks, and the most aggregates a chunk's blocks reach from
     /// it: a chunk restricts into a window of aggregates, not all of them
-    /// (they are founded in block order, so a chunk's aggregates lie close
+    /// (they are founded in block order, blocks a cut appended beside
+    /// their anchors, so a chunk's aggregates mostly lie close
     /// together: on bunny_100k 1024 blocks reach windows of at most about
     /// 150 of 898 aggregates).
     chunk_blocks: usize,
@@ -101,17 +102,19 @@ pub(super) struct CoarseSpace {
 }
 
 impl CoarseSpace {
-    /// Aggregates of the blocks of `blocks`, their system solved exactly up
-    /// to `max_aggregates` aggregates, else by a cycle whose aggregates of
-    /// aggregates are coarsened to at most that many (or until a round
-    /// merges nothing).
+    /// Aggregates of the blocks of `blocks` (founded visiting them in
+    /// order), their system solved exactly up to `max_aggregates`
+    /// aggregates, else by a cycle whose aggregates of aggregates are
+    /// coarsened to at most that many (or until a round merges nothing).
     #[cfg(test)]
     pub fn new(blocks: &BlockStructure, max_aggregates: usize, chunk_blocks: usize) -> Self {
-        Self::renew(blocks, max_aggregates, chunk_blocks, Self::default())
+        let visit: Vec<u32> = (0..blocks.len() as u32).collect();
+        Self::renew(blocks, &visit, max_aggregates, chunk_blocks, Self::default())
     }
 
-    /// [`CoarseSpace::new`], restricting in chunks of `chunk_blocks`
-    /// blocks, in the arrays of `old` (the space of the
+    /// [`CoarseSpace::new`] with the blocks visited in the order `visit`
+    /// (each once; see [`super::ordering::anchored_order`]), restricting in
+    /// chunks of `chunk_blocks` blocks, in the arrays of `old` (the space of the
     /// pattern before a topology change, or an empty one): a space per cut
     /// reuses its predecessor's memory instead of faulting in fresh pages
     /// for its runs.
@@ -122,12 +125,20 @@ impl CoarseSpace {
     /// 2.7 ms for the columns' runs. So keeping the aggregates that a cut
     /// did not touch would save little by itself. The graph and the runs
     /// would have to be updated in place too.
-    pub fn renew(blocks: &BlockStructure, max_aggregates: usize, chunk_blocks: usize, old: Self) -> Self {
+    pub fn renew(
+        blocks: &BlockStructure,
+        visit: &[u32],
+        max_aggregates: usize,
+        chunk_blocks: usize,
+        old: Self,
+    ) -> Self {
         let n = blocks.ptr.len() - 1;
         let limit = max_aggregates.max(1);
         // one round (none for a system the limit solves whole)
-        let round =
-            (n > limit).then(|| aggregate(&blocks.ptr, &blocks.rows, |_| true)).filter(|&(_, merged)| merged < n);
+        let visit = visit.iter().map(|&v| v as usize);
+        let round = (n > limit)
+            .then(|| aggregate(&blocks.ptr, &blocks.rows, visit, |_| true))
+            .filter(|&(_, merged)| merged < n);
         let (of, count, graph) = match round {
             Some((of, count)) => {
                 let graph = quotient(&blocks.ptr, &blocks.rows, &of, count);
@@ -145,7 +156,7 @@ impl CoarseSpace {
         // (marked with the column), and each one's slot among the
         // neighbours of the column's own aggregate (looked up in a table
         // of that aggregate's neighbours, which consecutive columns mostly
-        // share: aggregates are founded in block order)
+        // share: aggregates are founded in about block order)
         let tasks: Vec<std::ops::Range<usize>> =
             (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
         let listed: Vec<(Vec<u32>, Vec<u32>, Vec<u32>)> = tasks
@@ -544,7 +555,7 @@ fn coarsen(graph: &(Vec<u32>, Vec<u32>), count: usize, limit: usize) -> Option<(
         if size.iter().sum::<usize>() <= limit * limit {
             break;
         }
-        let (round, merged) = aggregate(ptr, adj, |v| size[v] > 1);
+        let (round, merged) = aggregate(ptr, adj, 0..ptr.len() - 1, |v| size[v] > 1);
         if merged == groups {
             break;
         }
@@ -568,19 +579,25 @@ fn component_sizes(ptr: &[u32], adj: &[u32]) -> Vec<usize> {
 
 /// One round of greedy aggregation of the graph whose vertex `v` has the
 /// neighbours `adj[ptr[v]..ptr[v + 1]]` (itself among them or not), among
-/// the vertices that `merges`: a vertex whose neighbours are all free
-/// founds an aggregate of itself and them, in vertex order; every vertex
-/// left then joins the aggregate of its first neighbour that has one (after
-/// the first pass, every free vertex has such a neighbour: else it would
-/// have founded one). A vertex that does not merge (nor may any of its
-/// neighbours) is an aggregate of its own. Returns the aggregate of every
-/// vertex and their number.
-fn aggregate(ptr: &[u32], adj: &[u32], merges: impl Fn(usize) -> bool) -> (Vec<u32>, usize) {
+/// the vertices that `merges`, visited in the order `visit` (every vertex
+/// once): a vertex whose neighbours are all free founds an aggregate of
+/// itself and them; every vertex left then joins the aggregate of its
+/// first neighbour that has one (after the first pass, every free vertex
+/// has such a neighbour: else it would have founded one). A vertex that
+/// does not merge (nor may any of its neighbours) is an aggregate of its
+/// own. Returns the aggregate of every vertex (numbered as they were
+/// founded) and their number.
+fn aggregate(
+    ptr: &[u32],
+    adj: &[u32],
+    visit: impl Iterator<Item = usize> + Clone,
+    merges: impl Fn(usize) -> bool,
+) -> (Vec<u32>, usize) {
     let n = ptr.len() - 1;
     let neighbours = |v: usize| if merges(v) { &adj[ptr[v] as usize..ptr[v + 1] as usize] } else { &[] };
     let mut of = vec![FREE; n];
     let mut count = 0u32;
-    for v in 0..n {
+    for v in visit.clone() {
         if of[v] == FREE && neighbours(v).iter().all(|&u| of[u as usize] == FREE) {
             of[v] = count;
             neighbours(v).iter().for_each(|&u| of[u as usize] = count);
@@ -588,7 +605,7 @@ fn aggregate(ptr: &[u32], adj: &[u32], merges: impl Fn(usize) -> bool) -> (Vec<u
         }
     }
     let founded = of.clone();
-    for v in 0..n {
+    for v in visit {
         if of[v] == FREE {
             of[v] = neighbours(v).iter().map(|&u| founded[u as usize]).find(|&a| a != FREE).expect("see above");
         }
@@ -719,7 +736,7 @@ mod tests {
     fn aggregates_cover_every_block_and_are_connected() {
         let (pattern, _) = grid(9, 7, 5);
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        let one_round = aggregate(&blocks.ptr, &blocks.rows, |_| true).1;
+        let one_round = aggregate(&blocks.ptr, &blocks.rows, 0..blocks.len(), |_| true).1;
         for limit in [1000, 40, 5] {
             let coarse = CoarseSpace::new(&blocks, limit, 1024);
             let m = coarse.aggregates();
@@ -797,7 +814,7 @@ mod tests {
         let n = pattern.nrows();
         let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
         // (a limit the aggregates of one round stay under: A₁ is solved exactly)
-        let limit = aggregate(&blocks.ptr, &blocks.rows, |_| true).1;
+        let limit = aggregate(&blocks.ptr, &blocks.rows, 0..blocks.len(), |_| true).1;
         for (rotations, chunk_blocks) in [(false, 1024), (true, 1024), (false, 5), (true, 5)] {
             // restricted in one chunk, and in chunks of 5 blocks (runs of an
             // aggregate cut by chunk ends)
