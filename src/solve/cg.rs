@@ -1150,14 +1150,9 @@ impl ConjugateGradient {
         // coarse level, and takes the new reference before a solve)
         let limit = aggregate_limit(blocks.values_len());
         let old = self.coarse.take().unwrap_or_default();
-        // (a cut's change to a space that can follow it, else the whole renewal)
-        let changed = self.numbering.changed_columns().filter(|_| old.can_follow(blocks.len(), limit));
-        self.coarse = self.rest.is_none().then(|| match changed {
-            Some(changed) => old.follow(blocks, changed, limit, CHUNK_BLOCKS),
-            None => {
-                let visit = anchored_order(blocks, self.numbering.analysed());
-                CoarseSpace::renew(blocks, &visit, limit, CHUNK_BLOCKS, old)
-            }
+        self.coarse = self.rest.is_none().then(|| {
+            let visit = anchored_order(blocks, self.numbering.analysed());
+            CoarseSpace::renew(blocks, &visit, limit, CHUNK_BLOCKS, old)
         });
         self.coarse_age = CoarseAge::default();
         self.positions.clear();

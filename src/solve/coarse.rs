@@ -22,17 +22,14 @@
 //! `aggregate_cycle.rs` for the groups' blocks that replaced it.)
 //!
 //! Aggregates follow the matrix graph, so no aggregate spans two pieces of
-//! a cut body. After a cut, the aggregates it touched are made again and
-//! the others kept, with their part of the graph and the runs
-//! ([`CoarseSpace::follow`]). Every sum runs in a fixed order, so the
-//! correction has the same bits on any number of threads.
+//! a cut body. Every sum runs in a fixed order, so the correction has the
+//! same bits on any number of threads.
 
 use cleave_kernels::spmv::Value;
 use cleave_kernels::vec3::cross;
 use rayon::prelude::*;
 
 use super::aggregate_cycle::{AggregateCycle, AggregateMatrix, ROTATION_FLOOR};
-use super::ordering::anchors;
 use super::{BlockStructure, SolveError};
 
 /// The most aggregates whose system the coarse level solves exactly, and
@@ -72,9 +69,7 @@ pub(super) struct CoarseSpace {
     /// The runs of every block column: its block rows of one aggregate
     /// each, column `j`'s at `run_ptr[j]..run_ptr[j + 1]`, run `k` those in
     /// aggregate `run_aggregate[k]`, in the order the rows first meet them,
-    /// and the block of `A₁` it adds to, the `run_slot[k]`-th of the
-    /// column's aggregate's neighbours (a place within the aggregate's
-    /// list, which a change elsewhere does not move).
+    /// and the block of `A₁` it adds to, `run_slot[k]`.
     run_ptr: Vec<u32>,
     run_aggregate: Vec<u32>,
     run_slot: Vec<u32>,
@@ -123,6 +118,13 @@ impl CoarseSpace {
     /// pattern before a topology change, or an empty one): a space per cut
     /// reuses its predecessor's memory instead of faulting in fresh pages
     /// for its runs.
+    ///
+    /// After a blade cut of bunny_100k, a renewal took 6.7 ms of CPU
+    /// (sampled by `perf` over 24 cuts, Intel Xeon model 207): 0.7 ms
+    /// for the greedy aggregation, 1.5 ms for the aggregates' graph and
+    /// 2.7 ms for the columns' runs. So keeping the aggregates that a cut
+    /// did not touch would save little by itself. The graph and the runs
+    /// would have to be updated in place too.
     pub fn renew(
         blocks: &BlockStructure,
         visit: &[u32],
@@ -144,135 +146,68 @@ impl CoarseSpace {
             }
             None => ((0..n as u32).collect(), n, (blocks.ptr.clone(), blocks.rows.clone())),
         };
-        Self::lay_out(blocks, (of, count, graph), None, limit, chunk_blocks, old)
-    }
-
-    /// Whether [`CoarseSpace::follow`] can carry this space to a structure
-    /// of `blocks` blocks that extends its own, for `max_aggregates`: it
-    /// made a round of aggregation, and there are as many blocks or more.
-    pub fn can_follow(&self, blocks: usize, max_aggregates: usize) -> bool {
-        let before = self.of.len();
-        0 < before && before <= blocks && self.aggregates() < before && blocks > max_aggregates.max(1)
-    }
-
-    /// The space of `blocks`, a structure that extends this space's own
-    /// (its blocks first, numbered as they were, new ones after them) and
-    /// differs from it in the block columns `changed` (ascending, every
-    /// new one among them), made by changing this space where the
-    /// structure changed, not over all of it ([`CoarseSpace::can_follow`]
-    /// must hold; otherwise, or after many changes, [`CoarseSpace::renew`]):
-    ///
-    /// - the old blocks keep their aggregates, except that an aggregate
-    ///   whose changed columns no longer connect it keeps its first
-    ///   connected part and each other part becomes an aggregate (no
-    ///   aggregate spans two pieces of a cut body);
-    /// - the new blocks are aggregated among themselves, each founding one
-    ///   of itself and its neighbours when they are all new and free, then
-    ///   the rest joining the aggregate of their first neighbour with one;
-    /// - the neighbour lists of the aggregates that hold a changed column,
-    ///   a block that changed aggregate or one of its neighbours are made
-    ///   again, and the runs of these aggregates' blocks' columns; the
-    ///   other lists and runs are carried over.
-    ///
-    /// After a blade cut of bunny_100k, a whole renewal took 7.8-8.7 ms of
-    /// CPU (sampled by `perf` over 36 cuts, Intel Xeon model 207), 3.5 ms
-    /// of it listing the columns' runs and 2.1 ms the aggregates' graph.
-    pub fn follow(self, blocks: &BlockStructure, changed: &[u32], max_aggregates: usize, chunk_blocks: usize) -> Self {
-        let (of, count, affected) = follow_aggregates(blocks, changed, (&self.of, &self.ptr, &self.members));
-        let (members_ptr, members) = group(&of, count);
-        let affected_list: Vec<u32> = (0..count as u32).filter(|&a| affected[a as usize]).collect();
-        let lists = neighbour_lists((&blocks.ptr, &blocks.rows), &of, count, (&members_ptr, &members), &affected_list);
-        let (old_ptr, old_rows) = (&self.system.ptr, &self.system.rows);
-        let mut graph_ptr = Vec::with_capacity(count + 1);
-        let mut graph_rows = Vec::with_capacity(old_rows.len() + lists.iter().map(Vec::len).sum::<usize>());
-        graph_ptr.push(0u32);
-        let mut relisted = lists.iter();
-        for a in 0..count {
-            if affected[a] {
-                graph_rows.extend_from_slice(relisted.next().expect("one list per affected aggregate"));
-            } else {
-                graph_rows.extend_from_slice(&old_rows[old_ptr[a] as usize..old_ptr[a + 1] as usize]);
-            }
-            graph_ptr.push(graph_rows.len() as u32);
-        }
-        let mut columns: Vec<u32> = affected_list
-            .iter()
-            .flat_map(|&a| &members[members_ptr[a as usize] as usize..members_ptr[a as usize + 1] as usize])
-            .copied()
-            .collect();
-        columns.sort_unstable();
-        let limit = max_aggregates.max(1);
-        Self::lay_out(blocks, (of, count, (graph_ptr, graph_rows)), Some(&columns), limit, chunk_blocks, self)
-    }
-
-    /// The space of the aggregates `of` (`count` of them, `graph` their
-    /// graph) on `blocks`: their members, the cycle on the aggregates of
-    /// aggregates coarsened to `limit`, and the runs of every block column,
-    /// listed again for the columns `relisted` (ascending; all when `None`)
-    /// and carried over from `old` for the others.
-    fn lay_out(
-        blocks: &BlockStructure,
-        (of, count, graph): (Vec<u32>, usize, (Vec<u32>, Vec<u32>)),
-        relisted: Option<&[u32]>,
-        limit: usize,
-        chunk_blocks: usize,
-        old: Self,
-    ) -> Self {
-        let n = blocks.ptr.len() - 1;
         let grouping = coarsen(&graph, count, limit);
         let (ptr, members) = group(&of, count);
-        let all: Vec<u32>;
-        let columns = match relisted {
-            Some(columns) => columns,
-            None => {
-                all = (0..n as u32).collect();
-                &all
-            }
-        };
-        let listed = list_runs(blocks, &of, count, (&graph.0, &graph.1), columns);
-        // the runs laid out column by column: listed again, or carried over
-        // from the old arrays (whose memory a whole renewal reuses)
-        let mut old = old;
-        let mut arrays = (
-            std::mem::take(&mut old.run_ptr),
-            std::mem::take(&mut old.run_aggregate),
-            std::mem::take(&mut old.run_slot),
-        );
-        let carried = relisted.map(|_| std::mem::take(&mut arrays));
-        let (mut run_ptr, mut run_aggregate, mut run_slot) = arrays;
-        let runs = listed.iter().map(|(_, aggregates, _)| aggregates.len()).sum::<usize>()
-            + carried.as_ref().map_or(0, |(_, aggregates, _)| aggregates.len());
-        run_ptr.clear();
+        let column_rows = |j: usize| &blocks.rows[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+        let (graph_ptr, graph_rows) = graph;
+        // every task of columns lists its columns' runs (in parallel, in
+        // order), then the lists are laid end to end: a column's runs are
+        // the aggregates of its rows, each once, as the rows meet them
+        // (marked with the column), and each one's slot among the
+        // neighbours of the column's own aggregate (looked up in a table
+        // of that aggregate's neighbours, which consecutive columns mostly
+        // share: aggregates are founded in about block order)
+        let tasks: Vec<std::ops::Range<usize>> =
+            (0..n).step_by(RUN_TASK_COLUMNS).map(|first| first..(first + RUN_TASK_COLUMNS).min(n)).collect();
+        let listed: Vec<(Vec<u32>, Vec<u32>, Vec<u32>)> = tasks
+            .into_par_iter()
+            .map(|columns| {
+                let (mut counts, mut aggregates, mut slots) = (Vec::new(), Vec::new(), Vec::new());
+                let (mut marked, mut slot_in, mut table_of) = (vec![FREE; count], vec![0u32; count], FREE);
+                for j in columns {
+                    let b = of[j];
+                    let neighbours = graph_ptr[b as usize]..graph_ptr[b as usize + 1];
+                    if table_of != b {
+                        neighbours.clone().for_each(|p| slot_in[graph_rows[p as usize] as usize] = p);
+                        table_of = b;
+                    }
+                    let before = aggregates.len();
+                    for &r in column_rows(j) {
+                        let a = of[r as usize];
+                        if marked[a as usize] != j as u32 {
+                            marked[a as usize] = j as u32;
+                            let slot = slot_in[a as usize];
+                            assert!(
+                                neighbours.contains(&slot) && graph_rows[slot as usize] == a,
+                                "aggregates of neighbouring blocks are neighbours"
+                            );
+                            aggregates.push(a);
+                            slots.push(slot);
+                        }
+                    }
+                    counts.push((aggregates.len() - before) as u32);
+                }
+                (counts, aggregates, slots)
+            })
+            .collect();
+        let mut run_ptr = Vec::with_capacity(n + 1);
+        run_ptr.push(0u32);
+        for count in listed.iter().flat_map(|(counts, _, _)| counts) {
+            run_ptr.push(run_ptr[run_ptr.len() - 1] + count);
+        }
+        let (mut run_aggregate, mut run_slot, mut run_sums) = (old.run_aggregate, old.run_slot, old.run_sums);
+        let runs = run_ptr[n] as usize;
         run_aggregate.clear();
         run_slot.clear();
-        crate::reserve_room(&mut run_ptr, n + 1);
         crate::reserve_room(&mut run_aggregate, runs);
         crate::reserve_room(&mut run_slot, runs);
-        run_ptr.push(0u32);
-        let mut fresh = listed.iter().flat_map(|(counts, aggregates, slots)| {
-            counts.iter().scan(0usize, move |at, &c| {
-                let span = *at..*at + c as usize;
-                *at += c as usize;
-                Some((&aggregates[span.clone()], &slots[span]))
-            })
-        });
-        let mut next = columns.iter().peekable();
-        for j in 0..n {
-            let (aggregates, slots) = if next.next_if(|&&c| c as usize == j).is_some() {
-                fresh.next().expect("one list per listed column")
-            } else {
-                let (ptr, aggregates, slots) = carried.as_ref().expect("every column is listed in a whole renewal");
-                let span = ptr[j] as usize..ptr[j + 1] as usize;
-                (&aggregates[span.clone()], &slots[span])
-            };
+        listed.iter().for_each(|(_, aggregates, slots)| {
             run_aggregate.extend_from_slice(aggregates);
             run_slot.extend_from_slice(slots);
-            run_ptr.push(run_aggregate.len() as u32);
-        }
-        let mut run_sums = old.run_sums;
-        crate::resize_with_room(&mut run_sums, run_aggregate.len(), [0.0; 18]);
+        });
+        crate::resize_with_room(&mut run_sums, runs, [0.0; 18]);
         let mut system = old.system;
-        (system.ptr, system.rows) = graph;
+        (system.ptr, system.rows) = (graph_ptr, graph_rows);
         let cycle = AggregateCycle::renew(count, grouping, (&system.ptr, &system.rows), old.cycle);
         let chunk_blocks = chunk_blocks.max(1);
         let spans: Vec<(u32, u32)> = of
@@ -405,8 +340,7 @@ impl CoarseSpace {
                 let runs = self.run_ptr[j as usize] as usize..self.run_ptr[j as usize + 1] as usize;
                 let dj = if rotations { self.offsets[j as usize] } else { [0.0; 3] };
                 for (sum, &slot) in self.run_sums[runs.clone()].iter().zip(&self.run_slot[runs]) {
-                    let at = ptr[b] as usize + slot as usize - first_block;
-                    let block = &mut out[kk * at..kk * (at + 1)];
+                    let block = &mut out[kk * (slot as usize - first_block)..kk * (slot as usize - first_block + 1)];
                     // entry (r, c) at c k + r
                     for c in 0..3 {
                         (0..3).for_each(|r| block[c * k + r] += sum[3 * c + r]);
@@ -646,93 +580,56 @@ fn component_sizes(ptr: &[u32], adj: &[u32]) -> Vec<usize> {
 /// One round of greedy aggregation of the graph whose vertex `v` has the
 /// neighbours `adj[ptr[v]..ptr[v + 1]]` (itself among them or not), among
 /// the vertices that `merges`, visited in the order `visit` (every vertex
-/// once; see [`found_aggregates`]). Returns the aggregate of every vertex
-/// (numbered as they were founded) and their number.
+/// once): a vertex whose neighbours are all free founds an aggregate of
+/// itself and them; every vertex left then joins the aggregate of its
+/// first neighbour that has one (after the first pass, every free vertex
+/// has such a neighbour: else it would have founded one). A vertex that
+/// does not merge (nor may any of its neighbours) is an aggregate of its
+/// own. Returns the aggregate of every vertex (numbered as they were
+/// founded) and their number.
 fn aggregate(
     ptr: &[u32],
     adj: &[u32],
     visit: impl Iterator<Item = usize> + Clone,
     merges: impl Fn(usize) -> bool,
 ) -> (Vec<u32>, usize) {
-    let mut of = vec![FREE; ptr.len() - 1];
-    let mut count = 0u32;
-    let next = || {
-        count += 1;
-        count - 1
-    };
-    found_aggregates((ptr, adj), visit, merges, &mut of, next);
-    (of, count as usize)
-}
-
-/// Aggregates the vertices `visit` (in that order) of the graph (offsets,
-/// neighbours; every vertex's among them or not) that are free in `of`,
-/// the others keeping theirs: a vertex whose neighbours are all free
-/// founds an aggregate of itself and them, numbered `next()`; every
-/// vertex left then joins the aggregate of its first neighbour that has
-/// one (after the first pass, every free vertex has such a neighbour: else
-/// it would have founded one). A vertex that does not `merge` (nor may any
-/// of its neighbours) is an aggregate of its own.
-fn found_aggregates(
-    (ptr, adj): (&[u32], &[u32]),
-    visit: impl Iterator<Item = usize> + Clone,
-    merges: impl Fn(usize) -> bool,
-    of: &mut [u32],
-    mut next: impl FnMut() -> u32,
-) {
+    let n = ptr.len() - 1;
     let neighbours = |v: usize| if merges(v) { &adj[ptr[v] as usize..ptr[v + 1] as usize] } else { &[] };
+    let mut of = vec![FREE; n];
+    let mut count = 0u32;
     for v in visit.clone() {
         if of[v] == FREE && neighbours(v).iter().all(|&u| of[u as usize] == FREE) {
-            let a = next();
-            of[v] = a;
-            neighbours(v).iter().for_each(|&u| of[u as usize] = a);
+            of[v] = count;
+            neighbours(v).iter().for_each(|&u| of[u as usize] = count);
+            count += 1;
         }
     }
-    let founded = of.to_vec();
+    let founded = of.clone();
     for v in visit {
         if of[v] == FREE {
             of[v] = neighbours(v).iter().map(|&u| founded[u as usize]).find(|&a| a != FREE).expect("see above");
         }
     }
+    (of, count as usize)
 }
 
-/// The graph of the aggregates `of` (`count` of them) of the vertices of
-/// the graph (offsets `ptr`, neighbours `adj`): two aggregates are
+/// The graph of the aggregates `of` (`count` of them): two aggregates are
 /// neighbours when any of their vertices are.
+/// (The aggregates' neighbour lists are made in parallel, each in its own
+/// order, then sorted: the graph does not depend on the thread count.)
 fn quotient(ptr: &[u32], adj: &[u32], of: &[u32], count: usize) -> (Vec<u32>, Vec<u32>) {
-    let (members_ptr, members) = group(of, count);
-    let every: Vec<u32> = (0..count as u32).collect();
-    let lists = neighbour_lists((ptr, adj), of, count, (&members_ptr, &members), &every);
-    let mut out_ptr = Vec::with_capacity(count + 1);
-    out_ptr.push(0u32);
-    for list in &lists {
-        out_ptr.push(out_ptr[out_ptr.len() - 1] + list.len() as u32);
-    }
-    (out_ptr, lists.concat())
-}
-
-/// The neighbour lists (ascending) of the aggregates `aggregates` of the
-/// vertices of `graph` (offsets, neighbours): the aggregates `of` (`count`
-/// of them, vertices of `a` at `members[members_ptr[a]..members_ptr[a +
-/// 1]]`) of their vertices' neighbours. (Made in parallel, each in its own
-/// order, then sorted: the lists do not depend on the thread count.)
-fn neighbour_lists(
-    (ptr, adj): (&[u32], &[u32]),
-    of: &[u32],
-    count: usize,
-    (members_ptr, members): (&[u32], &[u32]),
-    aggregates: &[u32],
-) -> Vec<Vec<u32>> {
-    aggregates
-        .par_iter()
+    let (vertex_ptr, vertices) = group(of, count);
+    let lists: Vec<Vec<u32>> = (0..count)
+        .into_par_iter()
         .map_init(
             || vec![FREE; count],
-            |seen, &a| {
+            |seen, a| {
                 let mut list = Vec::new();
-                for &v in &members[members_ptr[a as usize] as usize..members_ptr[a as usize + 1] as usize] {
+                for &v in &vertices[vertex_ptr[a] as usize..vertex_ptr[a + 1] as usize] {
                     for &u in &adj[ptr[v as usize] as usize..ptr[v as usize + 1] as usize] {
                         let b = of[u as usize];
-                        if seen[b as usize] != a {
-                            seen[b as usize] = a;
+                        if seen[b as usize] != a as u32 {
+                            seen[b as usize] = a as u32;
                             list.push(b);
                         }
                     }
@@ -741,131 +638,13 @@ fn neighbour_lists(
                 list
             },
         )
-        .collect()
-}
-
-/// The runs of the block columns `columns` of `blocks` (see
-/// [`CoarseSpace::run_ptr`]) under the aggregates `of` (`count` of them)
-/// and their `graph` (offsets, neighbours), listed by tasks of
-/// [`RUN_TASK_COLUMNS`] columns in parallel, in order: per task, every
-/// column's number of runs, their aggregates and their slots. A column's
-/// runs are the aggregates of its rows, each once, as the rows meet them
-/// (marked with the column), and each one's slot among the neighbours of
-/// the column's own aggregate (looked up in a table of that aggregate's
-/// neighbours, which consecutive columns mostly share: aggregates are
-/// founded in about block order).
-fn list_runs(
-    blocks: &BlockStructure,
-    of: &[u32],
-    count: usize,
-    (graph_ptr, graph_rows): (&[u32], &[u32]),
-    columns: &[u32],
-) -> Vec<(Vec<u32>, Vec<u32>, Vec<u32>)> {
-    columns
-        .par_chunks(RUN_TASK_COLUMNS)
-        .map(|columns| {
-            let (mut counts, mut aggregates, mut slots) = (Vec::new(), Vec::new(), Vec::new());
-            let (mut marked, mut slot_in, mut table_of) = (vec![FREE; count], vec![0u32; count], FREE);
-            for &j in columns {
-                let b = of[j as usize] as usize;
-                let neighbours = &graph_rows[graph_ptr[b] as usize..graph_ptr[b + 1] as usize];
-                if table_of != b as u32 {
-                    neighbours.iter().zip(0..).for_each(|(&a, slot)| slot_in[a as usize] = slot);
-                    table_of = b as u32;
-                }
-                let before = aggregates.len();
-                for &r in blocks.column_rows(j as usize) {
-                    let a = of[r as usize];
-                    if marked[a as usize] != j {
-                        marked[a as usize] = j;
-                        let slot = slot_in[a as usize];
-                        assert!(
-                            neighbours.get(slot as usize) == Some(&a),
-                            "aggregates of neighbouring blocks are neighbours"
-                        );
-                        aggregates.push(a);
-                        slots.push(slot);
-                    }
-                }
-                counts.push((aggregates.len() - before) as u32);
-            }
-            (counts, aggregates, slots)
-        })
-        .collect()
-}
-
-/// The aggregates of `blocks`, a structure extending the one of the
-/// aggregates `old` (every old block's aggregate, and the members of each)
-/// and differing from it in the columns `changed` (see
-/// [`CoarseSpace::follow`]): every block's aggregate, their number, and
-/// whether each aggregate's neighbour list (and its blocks' runs) must be
-/// made again.
-fn follow_aggregates(
-    blocks: &BlockStructure,
-    changed: &[u32],
-    (old_of, old_ptr, old_members): (&[u32], &[u32], &[u32]),
-) -> (Vec<u32>, usize, Vec<bool>) {
-    let (before, n, old_count) = (old_of.len(), blocks.len(), old_ptr.len() - 1);
-    let rows = |v: usize| blocks.column_rows(v);
-    // the region: the blocks of every aggregate with a changed column, and
-    // the new blocks, each visited right after its anchor
-    let mut touched: Vec<u32> =
-        changed.iter().filter(|&&j| (j as usize) < before).map(|&j| old_of[j as usize]).collect();
-    touched.sort_unstable();
-    touched.dedup();
-    let mut region: Vec<u32> = touched
-        .iter()
-        .flat_map(|&a| &old_members[old_ptr[a as usize] as usize..old_ptr[a as usize + 1] as usize])
-        .copied()
-        .chain(before as u32..n as u32)
         .collect();
-    let anchor = anchors(blocks, before);
-    region.sort_unstable_by_key(|&v| (anchor[v as usize], v));
-    let mut of = old_of.to_vec();
-    of.resize(n, FREE);
-    region.iter().for_each(|&v| of[v as usize] = FREE);
-    // (founded aggregates take the touched ones' numbers first)
-    let mut vacant = touched.iter().copied();
-    let mut count = old_count as u32;
-    let next = || {
-        vacant.next().unwrap_or_else(|| {
-            count += 1;
-            count - 1
-        })
-    };
-    found_aggregates((&blocks.ptr, &blocks.rows), region.iter().map(|&v| v as usize), |_| true, &mut of, next);
-    // numbers left vacant are filled by the last aggregates
-    let mut rename: Vec<u32> = (0..count).collect();
-    let mut holes: Vec<u32> = vacant.collect();
-    let mut last = count;
-    while let Some(&hole) = holes.first() {
-        last -= 1;
-        if holes.last() == Some(&last) {
-            holes.pop();
-        } else {
-            rename[last as usize] = hole;
-            holes.remove(0);
-        }
+    let mut out_ptr = Vec::with_capacity(count + 1);
+    out_ptr.push(0u32);
+    for list in &lists {
+        out_ptr.push(out_ptr[out_ptr.len() - 1] + list.len() as u32);
     }
-    let count = last as usize;
-    of.iter_mut().for_each(|a| *a = rename[*a as usize]);
-    // the aggregates whose lists change: those of the changed columns, and
-    // of the blocks that changed aggregate (before and after) and of their
-    // neighbours
-    let mut affected = vec![false; count];
-    for &j in changed {
-        affected[of[j as usize] as usize] = true;
-    }
-    for v in 0..n {
-        if v < before && of[v] == old_of[v] {
-            continue;
-        }
-        if v < before && (old_of[v] as usize) < count {
-            affected[old_of[v] as usize] = true;
-        }
-        rows(v).iter().for_each(|&u| affected[of[u as usize] as usize] = true);
-    }
-    (of, count, affected)
+    (out_ptr, lists.concat())
 }
 
 /// The vertices of each group of `of` (`count` groups), ascending: group
@@ -949,28 +728,6 @@ mod tests {
         (SymbolicSparseColMat::new_checked(3 * n, 3 * n, col_ptr, None, row_idx), values)
     }
 
-    /// Every aggregate of `coarse` is connected in the graph of `blocks`,
-    /// and not empty.
-    fn assert_connected(blocks: &BlockStructure, coarse: &CoarseSpace, case: &str) {
-        for a in 0..coarse.aggregates() {
-            let members = &coarse.members[coarse.ptr[a] as usize..coarse.ptr[a + 1] as usize];
-            assert!(!members.is_empty(), "{case}: aggregate {a} is empty");
-            // breadth-first search inside the aggregate reaches all of it
-            let mut reached = vec![members[0]];
-            let mut next = 0;
-            while next < reached.len() {
-                let v = reached[next] as usize;
-                next += 1;
-                for &u in blocks.column_rows(v) {
-                    if coarse.of[u as usize] == a as u32 && !reached.contains(&u) {
-                        reached.push(u);
-                    }
-                }
-            }
-            assert_eq!(reached.len(), members.len(), "{case}: aggregate {a} is not connected");
-        }
-    }
-
     /// Every block has an aggregate, every aggregate is connected in the
     /// matrix graph, one round makes the aggregates (none when the limit
     /// takes every block), and the aggregates of aggregates are coarsened
@@ -987,109 +744,24 @@ mod tests {
             assert_eq!(m, want, "limit {limit}: {m} aggregates");
             assert!(coarse.cycle.groups() <= limit, "limit {limit}: {} groups", coarse.cycle.groups());
             assert!(coarse.of.iter().all(|&a| (a as usize) < m));
-            assert_connected(&blocks, &coarse, &format!("limit {limit}"));
-        }
-    }
-
-    /// A grid of 9 x 7 x 5 blocks cracked as a cut cracks it (the
-    /// couplings between the planes x = 4 and x = 5 removed where y < 4,
-    /// a copy of each block of the plane x = 5 there appended, coupled to
-    /// its original's neighbours on that side, its original keeping the
-    /// other side's): the followed space's aggregates cover every block,
-    /// each connected; the aggregates away from the crack keep their
-    /// numbers; and its graph, runs and windows are those a whole layout
-    /// of the same aggregates makes.
-    #[test]
-    fn a_followed_space_is_the_space_of_its_aggregates() {
-        let (nx, ny, nz) = (9, 7, 5);
-        let (pattern, _) = grid(nx, ny, nz);
-        let blocks = BlockStructure::new(pattern.as_ref()).unwrap();
-        let (limit, chunk) = (8, 64);
-        let old = CoarseSpace::new(&blocks, limit, chunk);
-        let before = blocks.len();
-        let id = |x: usize, y: usize, z: usize| (x + nx * (y + ny * z)) as u32;
-        let mut columns: Vec<Vec<u32>> = (0..before).map(|j| blocks.column_rows(j).to_vec()).collect();
-        let mut copy_of = std::collections::HashMap::new();
-        for z in 0..nz {
-            for y in 0..4 {
-                copy_of.insert(id(5, y, z), (before + copy_of.len()) as u32);
-            }
-        }
-        columns.resize(before + copy_of.len(), Vec::new());
-        for (&original, &copy) in &copy_of {
-            // the copy takes the original's couplings to x >= 5 (to the
-            // copies where those are copied too); the original keeps x = 4
-            let (x, y, z) = (5, (original as usize / nx) % ny, original as usize / (nx * ny));
-            let mut own = vec![copy, id(6, y, z)];
-            for (dy, dz) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-                let (yy, zz) = (y as i64 + dy, z as i64 + dz);
-                if (0..ny as i64).contains(&yy) && (0..nz as i64).contains(&zz) {
-                    let neighbour = id(x, yy as usize, zz as usize);
-                    own.push(*copy_of.get(&neighbour).unwrap_or(&neighbour));
-                }
-            }
-            for &r in &own {
-                if r != copy && !columns[r as usize].contains(&copy) {
-                    columns[r as usize].push(copy);
-                }
-            }
-            columns[copy as usize] = own;
-            // the original loses its couplings to x >= 5
-            let (x4, x6) = (id(4, y, z), id(6, y, z));
-            columns[original as usize].retain(|&r| r == x4 || r == original);
-            columns[x6 as usize].retain(|&r| r != original);
-            for (dy, dz) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-                let (yy, zz) = (y as i64 + dy, z as i64 + dz);
-                if (0..ny as i64).contains(&yy) && (0..nz as i64).contains(&zz) {
-                    let neighbour = id(x, yy as usize, zz as usize);
-                    if !copy_of.contains_key(&neighbour) {
-                        columns[neighbour as usize].retain(|&r| r != original);
+            for a in 0..m {
+                let members = &coarse.members[coarse.ptr[a] as usize..coarse.ptr[a + 1] as usize];
+                assert!(!members.is_empty(), "aggregate {a} is empty");
+                // breadth-first search inside the aggregate reaches all of it
+                let mut reached = vec![members[0]];
+                let mut next = 0;
+                while next < reached.len() {
+                    let v = reached[next] as usize;
+                    next += 1;
+                    for &u in &blocks.rows[blocks.ptr[v] as usize..blocks.ptr[v + 1] as usize] {
+                        if coarse.of[u as usize] == a as u32 && !reached.contains(&u) {
+                            reached.push(u);
+                        }
                     }
                 }
+                assert_eq!(reached.len(), members.len(), "limit {limit}: aggregate {a} is not connected");
             }
         }
-        let (mut ptr, mut rows, mut start) = (vec![0u32], Vec::new(), Vec::new());
-        for column in &mut columns {
-            column.sort_unstable();
-            column.dedup();
-            start.push(9 * rows.len());
-            rows.extend_from_slice(column);
-            ptr.push(rows.len() as u32);
-        }
-        let nnz = 9 * rows.len();
-        let cracked = BlockStructure::from_columns(ptr, rows, start, nnz).unwrap();
-        for j in 0..cracked.len() {
-            for &r in cracked.column_rows(j) {
-                assert!(cracked.column_rows(r as usize).contains(&(j as u32)), "coupling ({r}, {j}) is one-sided");
-            }
-        }
-        let changed: Vec<u32> = (0..cracked.len())
-            .filter(|&j| j >= before || cracked.column_rows(j) != blocks.column_rows(j))
-            .map(|j| j as u32)
-            .collect();
-        assert!(changed.len() < cracked.len() / 2, "{} of {} columns changed", changed.len(), cracked.len());
-        let old_of = old.of.clone();
-        assert!(old.can_follow(cracked.len(), limit));
-        let followed = old.follow(&cracked, &changed, limit, chunk);
-        assert_eq!(followed.of.len(), cracked.len());
-        assert_connected(&cracked, &followed, "followed");
-        let far = (0..before).filter(|&j| j % nx <= 1);
-        assert!(far.clone().all(|j| followed.of[j] == old_of[j]), "an aggregate away from the crack was renumbered");
-        let count = followed.aggregates();
-        let graph = quotient(&cracked.ptr, &cracked.rows, &followed.of, count);
-        let whole = CoarseSpace::lay_out(
-            &cracked,
-            (followed.of.clone(), count, graph),
-            None,
-            limit,
-            chunk,
-            CoarseSpace::default(),
-        );
-        assert_eq!((&followed.ptr, &followed.members), (&whole.ptr, &whole.members));
-        assert_eq!((&followed.system.ptr, &followed.system.rows), (&whole.system.ptr, &whole.system.rows));
-        assert_eq!(followed.run_ptr, whole.run_ptr);
-        assert_eq!((&followed.run_aggregate, &followed.run_slot), (&whole.run_aggregate, &whole.run_slot));
-        assert_eq!((&followed.window_first, followed.window), (&whole.window_first, whole.window));
     }
 
     /// A body cut in pieces (a grid of 9 x 7 x 5 blocks, one of 3 x 2 x 1,

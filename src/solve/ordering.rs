@@ -139,31 +139,38 @@ const KEPT_ENVELOPE: f64 = 1.25;
 /// but a vector of 30k blocks (720 kB) stays in the caches.
 const KEPT_GROWTH: usize = 2;
 
-/// The anchor of every block of `blocks`: itself for the first `first`,
-/// and for each later one (appended since) the earliest of them it reaches
-/// through later blocks, the earliest anchor of its neighbours before it
-/// (itself if there is none).
-pub(super) fn anchors(blocks: &BlockStructure, first: usize) -> Vec<u32> {
-    let n = blocks.len();
-    let mut anchor: Vec<u32> = (0..n as u32).collect();
-    for b in first.min(n)..n {
-        let earlier = blocks.column_rows(b).iter().filter(|&&r| (r as usize) < b);
-        anchor[b] = earlier.map(|&r| anchor[r as usize]).min().unwrap_or(b as u32);
-    }
-    anchor
-}
-
 /// The blocks of `blocks` in the order of the first `analysed` (an order
-/// for locality), each later block right after its anchor ([`anchors`]),
-/// blocks of the same anchor in their own order. A greedy aggregation
-/// visiting the blocks so founds its aggregates as it would in an order
-/// for locality of all blocks: on twelve blade cuts across bunny_100k,
-/// the appended blocks visited last made the clamped steps after them
-/// take 1127 iterations for 1007.
+/// for locality), each later block (appended since) right after the
+/// earliest of them it reaches through later blocks, its anchor (the
+/// earliest anchor of its neighbours before it, itself if there is none);
+/// blocks of the same anchor follow it in their own order. A greedy
+/// aggregation visiting the blocks so founds its aggregates as it would
+/// in an order for locality of all blocks: on twelve blade cuts across
+/// bunny_100k, the appended blocks visited last made the clamped steps
+/// after them take 1127 iterations for 1007.
 pub(super) fn anchored_order(blocks: &BlockStructure, analysed: usize) -> Vec<u32> {
-    let anchor = anchors(blocks, analysed);
-    let mut order: Vec<u32> = (0..blocks.len() as u32).collect();
-    order.sort_unstable_by_key(|&b| (anchor[b as usize], b));
+    let n = blocks.len();
+    let analysed = analysed.min(n);
+    let mut anchor: Vec<u32> = (0..analysed as u32).collect();
+    let mut later: Vec<(u32, u32)> = Vec::with_capacity(n - analysed);
+    for b in analysed..n {
+        let reached = blocks.column_rows(b).iter().filter(|&&r| (r as usize) < b).map(|&r| anchor[r as usize]).min();
+        let a = reached.unwrap_or(b as u32);
+        anchor.push(a);
+        later.push((a, b as u32));
+    }
+    later.sort_unstable();
+    let mut order = Vec::with_capacity(n);
+    let mut next = later.iter().peekable();
+    for b in 0..n as u32 {
+        if (b as usize) < analysed {
+            order.push(b);
+        }
+        while let Some(&&(_, c)) = next.peek().filter(|(a, _)| *a == b) {
+            order.push(c);
+            next.next();
+        }
+    }
     order
 }
 
@@ -206,10 +213,6 @@ pub(super) struct Renumbering {
     /// structure's own order, and blocks were appended since): the
     /// renumbered structure is then the structure itself, copied.
     identity: bool,
-    /// Whether the last renewal appended to the order before it, and the
-    /// block columns (new numbers, ascending) whose rows it changed then.
-    appended: bool,
-    changed: Vec<u32>,
     /// The renumbering before the last [`Renumbering::renew`], whose sorted
     /// columns an appended order reuses (and whose arrays the next renewal
     /// writes into).
@@ -299,22 +302,17 @@ impl Renumbering {
         let last = kept.then_some(&self.last);
         let sort = |columns: Range<usize>, (rows, (source, unsorted)): (Along<u32>, (Along<u32>, Along<u32>))| {
             let (rows, source, unsorted) = (rows.0, source.0, unsorted.0);
-            // (the columns whose rows changed since the last renumbering)
-            let mut changed = Vec::new();
             if identity {
                 let span = old.ptr[columns.start] as usize..old.ptr[columns.end] as usize;
                 rows.copy_from_slice(&old.rows[span.clone()]);
                 unsorted.copy_from_slice(&old.rows[span]);
                 let mut at = 0;
                 for j in columns {
-                    let column = old.column_rows(j);
-                    source[at..at + column.len()].iter_mut().zip(0..).for_each(|(q, k)| *q = k);
-                    at += column.len();
-                    if last.is_none_or(|last| j >= before || last.column(j) != column) {
-                        changed.push(j as u32);
-                    }
+                    let len = old.column_rows(j).len();
+                    source[at..at + len].iter_mut().zip(0..).for_each(|(q, k)| *q = k);
+                    at += len;
                 }
-                return changed;
+                return;
             }
             let mut at = 0;
             for j in columns {
@@ -329,7 +327,6 @@ impl Renumbering {
                     at += column.len();
                     continue;
                 }
-                changed.push(j as u32);
                 // (a column's rows are distinct: an unstable sort is exact;
                 // a row and its place packed into one integer, row first,
                 // sort as the pairs would, with one comparison each)
@@ -341,16 +338,10 @@ impl Renumbering {
                 }
                 at += column.len();
             }
-            changed
         };
         let parts =
             (Along::blocks(&mut blocks.rows), (Along::blocks(&mut self.source), Along::blocks(&mut self.unsorted)));
-        let concatenate = |mut first: Vec<u32>, rest: Vec<u32>| {
-            first.extend(rest);
-            first
-        };
-        self.changed = in_column_tasks(&blocks.ptr, 0..n, parts, &sort, &concatenate);
-        self.appended = kept;
+        in_column_tasks(&blocks.ptr, 0..n, parts, &sort, &|(), ()| ());
         // the place of every new column's diagonal block among its rows
         let (rows, ptr) = (&blocks.rows, &blocks.ptr);
         self.diagonal.clear();
@@ -379,14 +370,6 @@ impl Renumbering {
     /// structure's blocks from there on were appended since.
     pub fn analysed(&self) -> usize {
         self.analysed
-    }
-
-    /// When the last [`Renumbering::renew`] appended blocks to the order
-    /// before it (the old blocks keeping their numbers), the columns of
-    /// the renumbered structure whose rows changed then, ascending (every
-    /// appended one among them).
-    pub fn changed_columns(&self) -> Option<&[u32]> {
-        self.appended.then_some(&self.changed[..])
     }
 
     /// The renumbered structure.
@@ -536,11 +519,6 @@ impl Renumbering {
 }
 
 impl SortedColumns {
-    /// The rows of new column `j` of this renumbering.
-    fn column(&self, j: usize) -> &[u32] {
-        &self.rows[self.ptr[j] as usize..self.ptr[j + 1] as usize]
-    }
-
     /// The sorted permutation of old block `o`'s column (`source`) when
     /// its rows `column` are the ones it had in this renumbering (the same
     /// old blocks at the same places): then, the old blocks keeping their
@@ -726,7 +704,6 @@ mod tests {
         let grown = structure(columns);
         again.renew(&grown);
         assert!(again.order().iter().enumerate().all(|(b, &o)| o as usize == b), "still the identity");
-        assert_eq!(again.changed_columns(), Some(&[3, added as u32][..]));
         assert_eq!(again.blocks(), &grown);
         let values: Vec<f64> = (0..9 * grown.rows_len()).map(|v| v as f64).collect();
         let mut out = vec![0.0; values.len()];
@@ -824,16 +801,9 @@ mod tests {
             columns[w].iter_mut().filter(|r| **r == x).for_each(|r| *r = added as u32);
             columns[x as usize].retain(|&r| r as usize != w);
             columns[added].push(w as u32);
-            let last_columns: Vec<Vec<u32>> =
-                (0..renumbering.blocks().len()).map(|j| renumbering.blocks().column_rows(j).to_vec()).collect();
             let old = structure(columns.clone());
             renumbering.renew(&old);
             let (order, rank, new) = (renumbering.order(), renumbering.rank(), renumbering.blocks());
-            let changed: Vec<u32> = (0..new.len())
-                .filter(|&j| last_columns.get(j).is_none_or(|c| c[..] != *new.column_rows(j)))
-                .map(|j| j as u32)
-                .collect();
-            assert_eq!(renumbering.changed_columns(), Some(&changed[..]), "round {round}");
             let kept: Vec<u32> = order.iter().copied().filter(|&o| (o as usize) < last.len()).collect();
             assert_eq!(kept, last, "round {round}: the old blocks keep their order");
             for j in 0..new.len() {
