@@ -684,18 +684,23 @@ mod tests {
     /// a column changed; a shuffled one does not.
     #[test]
     fn an_order_as_local_as_its_own_is_kept() {
+        // the renumbering is the identity, its structure `blocks`, and
+        // values are carried as they are
+        let kept_as_is = |renumbering: &Renumbering, blocks: &BlockStructure| {
+            assert!(renumbering.order().iter().enumerate().all(|(b, &o)| o as usize == b), "not the identity");
+            assert_eq!(renumbering.blocks(), blocks);
+            let values: Vec<f64> = (0..9 * blocks.rows_len()).map(|v| v as f64).collect();
+            let mut out = vec![0.0; values.len()];
+            renumbering.carry_exact(&values, &mut out);
+            assert_eq!(out, values);
+        };
         let mut first = Renumbering::default();
         first.renew(&shuffled_grid(8));
         assert!(first.order().iter().enumerate().any(|(b, &o)| o as usize != b), "a shuffled grid is renumbered");
         let banded = first.blocks().clone();
         let mut again = Renumbering::default();
         again.renew(&banded);
-        assert!(again.order().iter().enumerate().all(|(b, &o)| o as usize == b), "a banded grid keeps its order");
-        assert_eq!(again.blocks(), &banded);
-        let values: Vec<f64> = (0..9 * banded.rows_len()).map(|v| v as f64).collect();
-        let mut out = vec![0.0; values.len()];
-        again.carry_exact(&values, &mut out);
-        assert_eq!(out, values);
+        kept_as_is(&again, &banded);
         // a block appended and a column changed: still the structure itself
         let mut columns: Vec<Vec<u32>> = (0..banded.len()).map(|j| banded.column_rows(j).to_vec()).collect();
         let added = columns.len();
@@ -703,12 +708,7 @@ mod tests {
         columns[3].push(added as u32);
         let grown = structure(columns);
         again.renew(&grown);
-        assert!(again.order().iter().enumerate().all(|(b, &o)| o as usize == b), "still the identity");
-        assert_eq!(again.blocks(), &grown);
-        let values: Vec<f64> = (0..9 * grown.rows_len()).map(|v| v as f64).collect();
-        let mut out = vec![0.0; values.len()];
-        again.carry_exact(&values, &mut out);
-        assert_eq!(out, values);
+        kept_as_is(&again, &grown);
     }
 
     /// Blocks appended to a renumbered structure (as a cut appends nodes)
