@@ -132,9 +132,9 @@ const KEPT_ENVELOPE: f64 = 1.25;
 /// How many times the blocks of the last whole analysis a structure may
 /// hold for [`Renumbering::renew`] to append its new blocks to that
 /// analysis's order instead of ordering it again. Twelve blade cuts across
-/// bunny_100k append 12.6k nodes to its 17.6k (72 %); the product's time
-/// per iteration in the steps after them stayed 1.84 ms with the blocks
-/// appended against placed after their first old neighbours (Intel Xeon
+/// bunny_100k append 12.6k nodes to its 17.6k (72 %); the clamped steps
+/// after them took 1.82 ms per iteration with the blocks appended against
+/// 1.83 ms with each placed after its first old neighbour (Intel Xeon
 /// model 207): the appended columns' reads of the vector are scattered,
 /// but a vector of 30k blocks (720 kB) stays in the caches.
 const KEPT_GROWTH: usize = 2;
