@@ -296,8 +296,9 @@ impl Renumbering {
         crate::resize_with_room(&mut blocks.rows, total, 0);
         crate::resize_with_room(&mut self.source, total, 0);
         crate::resize_with_room(&mut self.unsorted, total, 0);
-        // each task sorts its columns' rows into their new numbers, or
-        // reuses the last sorted permutation of a column that did not change
+        // each task copies its columns' rows (in the structure's own order),
+        // or sorts them into their new numbers, reusing the last sorted
+        // permutation of a column that did not change
         let (order, rank, identity) = (&self.order, &self.rank, self.identity);
         let last = kept.then_some(&self.last);
         let sort = |columns: Range<usize>, (rows, (source, unsorted)): (Along<u32>, (Along<u32>, Along<u32>))| {
