@@ -40,6 +40,7 @@ pub mod moments;
 pub mod polynomial;
 pub mod quadrature;
 pub mod rotation;
+pub mod sliced;
 pub mod solve4;
 pub mod spectrum;
 pub mod spmv;

@@ -497,21 +497,21 @@ pub(crate) mod avx2 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A matrix as block columns (see [`BlockColumns`]) and dense.
-    struct Ring {
-        ptr: Vec<u32>,
-        rows: Vec<u32>,
-        start: Vec<usize>,
-        values: Vec<f64>,
-        dense: Vec<Vec<f64>>,
+    pub(crate) struct Ring {
+        pub ptr: Vec<u32>,
+        pub rows: Vec<u32>,
+        pub start: Vec<usize>,
+        pub values: Vec<f64>,
+        pub dense: Vec<Vec<f64>>,
     }
 
     /// A symmetric matrix of 3x3 blocks on a ring of `n` blocks, each
     /// coupled to itself and its `reach` neighbours on either side.
-    fn ring(n: usize, reach: usize) -> Ring {
+    pub(crate) fn ring(n: usize, reach: usize) -> Ring {
         let mut dense = vec![vec![0.0; 3 * n]; 3 * n];
         let entry = |i: usize, j: usize| ((i * 7 + j * 13) % 11) as f64 - 5.0 + 0.25 * (i + j) as f64;
         for bj in 0..n {

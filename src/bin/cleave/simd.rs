@@ -249,6 +249,19 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     // (the same matrix times 8 vectors at once: the products of a CG
     // solve's start from its history of corrections)
     let (blocks_8, values_8) = (blocks.clone(), values.clone());
+    // (and in the sliced layout the iteration takes its products in)
+    let sliced = cleave_kernels::sliced::SlicedLayout::new(blocks.columns(), blocks.len());
+    let mut sliced_values = vec![0.0f32; sliced.values_len()];
+    sliced.fill(&values, 0..sliced.groups(), &mut sliced_values);
+    let (x_sliced, mut y_sliced) = (x.clone(), y.clone());
+    let size_sliced = format!(
+        "K of box_tet {}x{}x{}, {} f32 values, {} padded",
+        cells[0],
+        cells[1],
+        cells[2],
+        values.len(),
+        sliced.values_len() - values.len()
+    );
     let x_8: Vec<f64> = (0..spmv::VECTORS * x.len()).map(|i| noise(i + 2)).collect();
     let mut y_8 = vec![0.0; x_8.len()];
     let size_8 = format!("K of box_tet {}x{}x{} times {} vectors", cells[0], cells[1], cells[2], spmv::VECTORS);
@@ -260,6 +273,12 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
             ms
         },
     ));
+    kernels.push(Kernel::one_lane("sliced block sparse product", size_sliced, move || {
+        let groups = 0..sliced.groups();
+        let run = || sliced.products(&sliced_values, &x_sliced, groups.clone(), 0, &mut y_sliced);
+        let (ms, _) = best_ms(5 * scale, run);
+        ms
+    }));
     kernels.push(Kernel::one_lane("block sparse product of vectors", size_8, move || {
         let columns = blocks_8.columns();
         let (ms, ()) = best_ms(5 * scale, || spmv::block_products_of_vectors(columns, &values_8, &x_8, 0, &mut y_8));
