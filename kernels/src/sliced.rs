@@ -168,10 +168,10 @@ impl SlicedLayout {
     }
 
     /// The values of `groups`: `out` (their stretch of the sliced values,
-    /// from the first slot of the first group) takes the values of the
-    /// column layout `values` (for the structure of [`SlicedLayout::new`]),
-    /// zeros where padded.
-    pub fn fill<T: Copy + Default>(&self, values: &[T], groups: Range<usize>, out: &mut [T]) {
+    /// [`SlicedLayout::values_of`]) takes the values of the column layout
+    /// (for the structure of [`SlicedLayout::new`]) whose stretch from
+    /// index `offset` on is `values`, zeros where padded.
+    pub fn fill<T: Copy + Default>(&self, values: &[T], offset: usize, groups: Range<usize>, out: &mut [T]) {
         let first = self.group_start[groups.start] as usize;
         assert_eq!(out.len(), self.values_of(groups.clone()).len(), "the stretch of the groups {groups:?}");
         let zero = [T::default(); 3];
@@ -181,7 +181,9 @@ impl SlicedLayout {
             // each lane's three scalar columns, block row `s`'s entries at `3 s..`
             let columns: [[&[T]; 3]; LANES] = core::array::from_fn(|l| {
                 let (start, n) = self.source[g * LANES + l];
-                core::array::from_fn(|c| &values[start + 3 * n as usize * c..start + 3 * n as usize * (c + 1)])
+                // (an empty lane reads nothing)
+                let (start, n) = (if n == 0 { 0 } else { start - offset }, n as usize);
+                core::array::from_fn(|c| &values[start + 3 * n * c..start + 3 * n * (c + 1)])
             });
             for (s, slot) in group.chunks_exact_mut(9 * LANES).enumerate() {
                 for (l, lane) in columns.iter().enumerate() {
@@ -447,7 +449,7 @@ mod tests {
             let values32: Vec<f32> = values.iter().map(|&v| v as f32).collect();
             let mut sliced = vec![f32::NAN; layout.values_len()];
             let groups = layout.groups_of(0..n);
-            layout.fill(&values32, groups.clone(), &mut sliced);
+            layout.fill(&values32, 0, groups.clone(), &mut sliced);
             let x: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.7).sin()).collect();
             // the rounded values' exact product, and the scale of its rounding
             let rounded = |i: usize, j: usize| f64::from(dense[i][j] as f32);
@@ -483,7 +485,7 @@ mod tests {
         let count = 9 * rows.len();
         let numbered: Vec<f64> = (0..count).map(|v| (v + 1) as f64).collect();
         let mut sliced = vec![-1.0; layout.values_len()];
-        layout.fill(&numbered, layout.groups_of(0..n), &mut sliced);
+        layout.fill(&numbered, 0, layout.groups_of(0..n), &mut sliced);
         let mut seen = vec![false; count];
         for &v in sliced.iter().filter(|&&v| v != 0.0) {
             assert!(!std::mem::replace(&mut seen[v as usize - 1], true), "value {v} twice");

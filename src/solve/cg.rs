@@ -15,11 +15,13 @@
 //! the values rounded to `f32`: a quarter of the bytes of a scalar `f64`
 //! product. The iteration takes its products in the sliced layout of
 //! `kernels/src/sliced.rs` (eight block columns side by side, one per
-//! SIMD lane), which a solve fills from the values after its first few
-//! products ([`SLICE_AFTER`]): on bunny_100k with its base clamped, CG to
-//! 1e-8 (2 cores, Intel Xeon, AVX-512, five runs of 20 steps of each
-//! alternated), the solve took 56 ms per step (median) against 65 ms with
-//! the products on the column layout, for the same 55.7 iterations. The
+//! SIMD lane), into which the values are written as they are rounded: on
+//! bunny_100k with its base clamped, CG to 1e-8 (2 cores, Intel Xeon,
+//! AVX-512, five runs of 20 steps of each alternated), the solve took 56
+//! ms per step (median) against 65 ms with the products on the column
+//! layout, for the same 55.7 iterations (and filling the sliced values in
+//! a pass of their own after a solve's fourth product, 3 ms more per step
+//! on one thread than writing them as they are rounded). The
 //! iteration's vectors stay `f64`,
 //! and the residual it must meet is taken with the `f64` values (see
 //! [`ConjugateGradient::solve`]). One pass per iteration updates `x` and
@@ -57,7 +59,7 @@ use rayon::prelude::*;
 
 use super::coarse::{aggregate_limit, CoarseSpace, Correction};
 use super::history::{ProjectionSums, SolutionHistory};
-use super::ordering::{anchored_order, Along, Renumbering};
+use super::ordering::{anchored_order, Along, AlongGroups, Renumbering};
 use super::{Cholesky, LinearSolver, SolveError, SolveStats, SystemPattern};
 
 /// Chunk length of the deterministic reductions.
@@ -69,15 +71,6 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 
 // (a chunk's product takes whole windows of the sliced layout)
 const _: () = assert!(CHUNK_BLOCKS % WINDOW == 0);
-
-/// Groups of the sliced layout filled by one task.
-const FILL_TASK_GROUPS: usize = 256;
-
-/// Products a solve takes on the column layout before it fills the sliced
-/// one: the fill costs about five products' savings (bunny_100k, 2 cores,
-/// Intel Xeon: 0.8 ms against 0.16 ms saved per product), which a body in
-/// free fall, one or two products per step, would not earn back.
-const SLICE_AFTER: usize = 4;
 
 /// PCG solver (see module docs).
 ///
@@ -121,21 +114,20 @@ pub struct ConjugateGradient {
     /// [`LinearSolver::solve_values`] is (a copy of 1 ms per cut on
     /// bunny_100k saved).
     given: BlockStructure,
-    /// The matrix values in the solver's layout rounded to `f32`, for the
-    /// products of the iteration, and as they are only for a matrix beyond
-    /// `f32`'s range (empty otherwise: see [`Operator`]).
+    /// The matrix values in the solver's layout rounded to `f32` (the
+    /// coarse level's products are summed from them; the iteration's
+    /// products read them sliced, `sliced_values`), and as they are only
+    /// for a matrix beyond `f32`'s range (empty otherwise: see
+    /// [`Operator`]).
     values32: Vec<f32>,
     values: Vec<f64>,
     /// The layout of the iteration's products: the block structure sliced
-    /// (`kernels/src/sliced.rs`), laid out for the current structure
-    /// (`sliced_laid`) and filled with `values32` (`sliced_current`) by
-    /// the first product that needs them.
+    /// (`kernels/src/sliced.rs`), laid out for the current structure by the
+    /// first solve on it (`sliced_laid`), and `values32` in it, written as
+    /// they are rounded.
     sliced: SlicedLayout,
     sliced_values: Vec<f32>,
     sliced_laid: bool,
-    sliced_current: bool,
-    /// Products taken on the column layout since `values32` changed.
-    column_products: usize,
     /// A vector in the caller's numbering, and its product.
     x_given: Vec<f64>,
     r_given: Vec<f64>,
@@ -221,14 +213,14 @@ struct Caller<'a> {
 }
 
 /// The matrix an iteration's products take: the values rounded to `f32` in
-/// the solver's layout; the solver's `f64` copy of a matrix beyond `f32`'s
+/// the solver's sliced layout; the solver's `f64` copy of a matrix beyond `f32`'s
 /// range; or, for the rare round that needs the exact values (the rounded
 /// ones stalled), the caller's `f64` values on its structure, the vectors
 /// carried to its numbering and back (no copy of 18 MB on bunny_100k kept
 /// for it, to be sized at every cut).
 #[derive(Clone, Copy)]
 enum Operator<'a> {
-    Rounded(&'a [f32]),
+    Rounded,
     Copied(&'a [f64]),
     Caller(Caller<'a>),
 }
@@ -513,8 +505,6 @@ impl ConjugateGradient {
             sliced: SlicedLayout::default(),
             sliced_values: Vec::new(),
             sliced_laid: false,
-            sliced_current: false,
-            column_products: 0,
             x_given: Vec::new(),
             r_given: Vec::new(),
             rounded: false,
@@ -574,10 +564,21 @@ impl ConjugateGradient {
             let m = invert3(b);
             [m[0], m[1], m[2], m[4], m[5], m[8]]
         };
-        // each task's columns: r = b - A x, A V, and their sums
-        let view = self.numbering.old_columns();
-        let parts = (Along::columns(&mut self.r, 3), Along::columns(a_v, 3 * VECTORS));
-        let task = |columns: Range<usize>, (r, a_v): &mut (Along<f64>, Along<f64>)| {
+        if !self.sliced_laid {
+            let blocks = self.numbering.blocks();
+            self.sliced.renew(blocks.columns(), blocks.len());
+            crate::resize_with_room(&mut self.sliced_values, self.sliced.values_len(), 0.0);
+            self.sliced_laid = true;
+        }
+        // each task's columns: their rounded values sliced, r = b - A x, A
+        // V, and their sums
+        let (view, layout, starts) = (self.numbering.old_columns(), &self.sliced, &self.numbering.blocks().start);
+        let sliced = AlongGroups { values: &mut self.sliced_values, layout, first: 0 };
+        let parts = ((Along::columns(&mut self.r, 3), Along::columns(a_v, 3 * VECTORS)), sliced);
+        type Parts<'a> = ((Along<'a, f64>, Along<'a, f64>), AlongGroups<'a>);
+        let task = |columns: Range<usize>, rounded: &[f32], ((r, a_v), sliced): &mut Parts<'_>| {
+            let groups = layout.groups_of(columns.clone());
+            layout.fill(rounded, starts[columns.start], groups, sliced.values);
             let unknowns = 3 * columns.start..3 * columns.end;
             block_products(view, given, x, columns.start, r.0);
             r.0.iter_mut().zip(&b[unknowns.clone()]).for_each(|(r, b)| *r = b - *r);
@@ -604,7 +605,6 @@ impl ConjugateGradient {
             return Err(SolveError::NonFinite);
         }
         self.pending = false;
-        (self.sliced_current, self.column_products) = (false, 0);
         self.rounded = rounded;
         if rounded {
             self.values.clear();
@@ -644,24 +644,9 @@ impl ConjugateGradient {
         partial.iter().sum()
     }
 
-    /// [`ConjugateGradient::matvec`] with `values32` in the sliced layout
-    /// (which it fills first if they changed, after [`SLICE_AFTER`]
-    /// products on the column layout): the iteration's product.
-    fn sliced_matvec(&mut self, values32: &[f32], x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
-        if !self.sliced_current && self.column_products < SLICE_AFTER {
-            self.column_products += 1;
-            return self.matvec(values32, x, y, partial);
-        }
-        if !self.sliced_laid {
-            let blocks = self.numbering.blocks();
-            self.sliced.renew(blocks.columns(), blocks.len());
-            crate::resize_with_room(&mut self.sliced_values, self.sliced.values_len(), 0.0);
-            self.sliced_laid = true;
-        }
-        if !self.sliced_current {
-            fill_sliced(&self.sliced, values32, 0..self.sliced.groups(), &mut self.sliced_values);
-            self.sliced_current = true;
-        }
+    /// [`ConjugateGradient::matvec`] with `values32` in the sliced layout:
+    /// the iteration's product.
+    fn sliced_matvec(&self, x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
         let (layout, values) = (&self.sliced, &self.sliced_values);
         y.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (yc, part))| {
             let columns = c * CHUNK_BLOCKS..c * CHUNK_BLOCKS + yc.len() / 3;
@@ -707,14 +692,14 @@ impl ConjugateGradient {
         round: Round,
         x: &mut [f64],
     ) -> Result<Ended, SolveError> {
-        let (values32, values) = (std::mem::take(&mut self.values32), std::mem::take(&mut self.values));
+        let values = std::mem::take(&mut self.values);
         let operator = match (exact, self.rounded) {
-            (false, _) => Operator::Rounded(&values32),
+            (false, _) => Operator::Rounded,
             (true, false) => Operator::Copied(&values),
             (true, true) => Operator::Caller(caller),
         };
         let out = self.iterate(operator, caller, round, x);
-        (self.values32, self.values) = (values32, values);
+        self.values = values;
         out
     }
 
@@ -722,7 +707,7 @@ impl ConjugateGradient {
     /// [`ConjugateGradient::matvec`]); returns `x · y`.
     fn product(&mut self, operator: Operator<'_>, x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
         match operator {
-            Operator::Rounded(values) => self.sliced_matvec(values, x, y, partial),
+            Operator::Rounded => self.sliced_matvec(x, y, partial),
             Operator::Copied(values) => self.matvec(values, x, y, partial),
             Operator::Caller(caller) => {
                 let x_ay = self.caller_product(caller, x, partial);
@@ -776,7 +761,7 @@ impl ConjugateGradient {
         // block Jacobi is applied inside the update pass; the rotated
         // rest-state factor needs the whole residual first
         let blockwise = !self.rest.as_ref().is_some_and(|p| p.ready);
-        let rounded = matches!(operator, Operator::Rounded(_));
+        let rounded = matches!(operator, Operator::Rounded);
         let mut replaced = round.start;
         for it in 0..round.budget {
             let (mut ap, mut partial) = (std::mem::take(&mut self.ap), std::mem::take(&mut self.partial));
@@ -1106,21 +1091,6 @@ fn row_times(m: &[f64; 9], i: usize, v: &[f64]) -> f64 {
     m[3 * i] * v[0] + m[3 * i + 1] * v[1] + m[3 * i + 2] * v[2]
 }
 
-/// Fills `out`, the stretch of the sliced values of `groups`, from the
-/// values `values` in the column layout, halving the groups across
-/// threads.
-fn fill_sliced(layout: &SlicedLayout, values: &[f32], groups: Range<usize>, out: &mut [f32]) {
-    if groups.len() <= FILL_TASK_GROUPS {
-        return layout.fill(values, groups, out);
-    }
-    let mid = groups.start + groups.len() / 2;
-    let (left, right) = out.split_at_mut(layout.values_of(groups.start..mid).len());
-    rayon::join(
-        || fill_sliced(layout, values, groups.start..mid, left),
-        || fill_sliced(layout, values, mid..groups.end, right),
-    );
-}
-
 /// `y = A x` for symmetric `A` stored in both triangles.
 pub fn symmetric_matvec(a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mut [f64]) {
     let (sym, val) = a.parts();
@@ -1238,7 +1208,7 @@ impl ConjugateGradient {
         // (every entry is written before it is read in a solve; the arrays
         // keep room for the next cuts, [`crate::reserve_room`])
         crate::resize_with_room(&mut self.values32, blocks.values_len(), 0.0);
-        (self.sliced_laid, self.sliced_current, self.column_products) = (false, false, 0);
+        self.sliced_laid = false;
         self.values.clear();
         for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.x_given] {
             crate::resize_with_room(v, n, 0.0);

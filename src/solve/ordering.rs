@@ -14,6 +14,7 @@
 
 use std::ops::Range;
 
+use cleave_kernels::sliced::{SlicedLayout, WINDOW};
 use cleave_kernels::spmv::BlockColumns;
 use rayon::prelude::*;
 
@@ -120,6 +121,9 @@ pub(crate) fn reverse_cuthill_mckee<I: Iterator<Item = usize>>(n: usize, neighbo
 
 /// Block columns per parallel task of the renumbering's passes.
 const TASK_COLUMNS: usize = 256;
+
+// (a range split in halves at windows leaves both halves some columns)
+const _: () = assert!(TASK_COLUMNS >= 2 * WINDOW);
 
 /// How much larger than its reverse Cuthill–McKee order's envelope a
 /// structure's own may be for [`Renumbering::renew`] to keep it. (The
@@ -401,9 +405,10 @@ impl Renumbering {
     /// layout rounded to `f32` into `rounded`, and `diagonal(block)` of
     /// every diagonal block (row-major, from the `f64` values) into
     /// `diagonals`, in the new numbering. Each parallel task of columns
-    /// then calls `task_done(columns, parts)` with its stretch of the
-    /// arrays `parts` while its columns' values are still in the cache (to
-    /// take products with them on [`Renumbering::old_columns`]); their
+    /// then calls `task_done(columns, rounded, parts)` with its stretch of
+    /// the rounded values and of the arrays `parts` while its columns'
+    /// values are still in the cache (to take products with them on
+    /// [`Renumbering::old_columns`]); their
     /// results are combined in column order. Returns whether every value
     /// is finite, whether every rounded one is (a finite value beyond
     /// `f32`'s range rounds to infinity), and the tasks' combined result.
@@ -417,7 +422,7 @@ impl Renumbering {
         diagonals: &mut [D],
         diagonal: impl Fn([f64; 9]) -> D + Sync,
         parts: P,
-        task_done: impl Fn(Range<usize>, &mut P) -> R + Sync,
+        task_done: impl Fn(Range<usize>, &[f32], &mut P) -> R + Sync,
         combine: impl Fn(R, R) -> R + Sync,
     ) -> (bool, bool, R) {
         let column_done = |j: usize, q: usize, column: &[f64], out: &[f32], (diagonals, _): &mut (Along<D>, P)| {
@@ -434,7 +439,7 @@ impl Renumbering {
             |v| v as f32,
             parts,
             column_done,
-            |columns, (_, parts)| task_done(columns, parts),
+            |columns, rounded, (_, parts)| task_done(columns, rounded, parts),
             combine,
         );
         // (every rounded value finite: then so is every value; else the
@@ -445,7 +450,7 @@ impl Renumbering {
     /// Writes the values `old` (laid out on the old structure) in the new
     /// layout into `out`.
     pub fn carry_exact(&self, old: &[f64], out: &mut [f64]) {
-        self.carry(old, out, |v| v, (), |_, _, _, _, _| true, |_, _| (), |(), ()| ());
+        self.carry(old, out, |v| v, (), |_, _, _, _, _| true, |_, _, _| (), |(), ()| ());
     }
 
     /// The old number of the first block whose column has no diagonal
@@ -460,7 +465,8 @@ impl Renumbering {
     /// `column_done(j, q, old column j, its new values, parts)` for every
     /// new block column `j` once it is written, the `q`-th column of its
     /// task, with the task's stretch of the arrays `parts`, and
-    /// `task_done(columns, parts)` once a task's columns are; returns
+    /// `task_done(columns, out, parts)` once a task's columns are (`out`
+    /// their values); returns
     /// whether the check `column_done` returns held for every column, and
     /// the results of `task_done` combined in column order.
     #[allow(clippy::too_many_arguments)]
@@ -471,7 +477,7 @@ impl Renumbering {
         convert: impl Fn(f64) -> T + Sync,
         parts: P,
         column_done: impl Fn(usize, usize, &[f64], &[T], &mut P) -> bool + Sync,
-        task_done: impl Fn(Range<usize>, &mut P) -> R + Sync,
+        task_done: impl Fn(Range<usize>, &[T], &mut P) -> R + Sync,
         combine: impl Fn(R, R) -> R + Sync,
     ) -> (bool, R) {
         let blocks = &self.blocks;
@@ -502,7 +508,7 @@ impl Renumbering {
                 checked &= column_done(j, j - first, column, out, &mut parts);
                 at += 3 * stride;
             }
-            (checked, task_done(columns, &mut parts))
+            (checked, task_done(columns, out, &mut parts))
         };
         let combine = |(a, x): (bool, R), (b, y): (bool, R)| (a && b, combine(x, y));
         in_column_tasks(&blocks.ptr, 0..n, (Along::values(out), parts), &carry, &combine)
@@ -579,6 +585,23 @@ impl<A: AlongColumns, B: AlongColumns> AlongColumns for (A, B) {
     }
 }
 
+/// The sliced values of the columns from `first` on (the stretch of their
+/// groups, [`SlicedLayout::values_of`]): split at windows.
+pub(super) struct AlongGroups<'a> {
+    pub values: &'a mut [f32],
+    pub layout: &'a SlicedLayout,
+    pub first: usize,
+}
+
+impl AlongColumns for AlongGroups<'_> {
+    fn split(self, _: usize, columns: usize) -> (Self, Self) {
+        let AlongGroups { values, layout, first } = self;
+        let mid = first + columns;
+        let (head, tail) = values.split_at_mut(layout.values_of(layout.groups_of(first..mid)).len());
+        (AlongGroups { values: head, layout, first }, AlongGroups { values: tail, layout, first: mid })
+    }
+}
+
 impl AlongColumns for () {
     fn split(self, _: usize, _: usize) -> (Self, Self) {
         ((), ())
@@ -587,8 +610,9 @@ impl AlongColumns for () {
 
 /// Runs `task` on ranges of at most [`TASK_COLUMNS`] block columns of
 /// `columns` in parallel, each with its stretch of `parts` (the columns'
-/// block offsets `ptr`), halving the range (without allocating); combines
-/// the tasks' results in column order.
+/// block offsets `ptr`), halving the range at a window of the sliced
+/// layout (without allocating); combines the tasks' results in column
+/// order. Ranges from a window on split into ranges from windows on.
 fn in_column_tasks<P: AlongColumns, R: Send>(
     ptr: &[u32],
     columns: Range<usize>,
@@ -599,7 +623,8 @@ fn in_column_tasks<P: AlongColumns, R: Send>(
     if columns.len() <= TASK_COLUMNS {
         return task(columns, parts);
     }
-    let mid = columns.start + columns.len() / 2;
+    // (at a window of the sliced layout, which a task's columns then fill)
+    let mid = (columns.start + columns.len() / 2) / WINDOW * WINDOW;
     let (first, rest) = parts.split((ptr[mid] - ptr[columns.start]) as usize, mid - columns.start);
     let (left, right) = rayon::join(
         || in_column_tasks(ptr, columns.start..mid, first, task, combine),
@@ -829,8 +854,33 @@ mod tests {
         diagonals: &mut [[f64; 9]],
     ) -> (bool, bool) {
         let (finite, in_range, ()) =
-            renumbering.round_values(values, rounded, diagonals, |b| b, (), |_, _| (), |(), ()| ());
+            renumbering.round_values(values, rounded, diagonals, |b| b, (), |_, _, _| (), |(), ()| ());
         (finite, in_range)
+    }
+
+    /// The tasks of a rounding pass each slice their own columns' values
+    /// (split at windows of the sliced layout): together, the values of
+    /// the whole rounded matrix sliced in one go.
+    #[test]
+    fn the_tasks_slice_the_rounded_values_as_a_whole_fill_does() {
+        let old = shuffled_grid(9);
+        let values: Vec<f64> = (0..9 * old.rows_len()).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.01).collect();
+        let mut renumbering = Renumbering::default();
+        renumbering.renew(&old);
+        let (blocks, n) = (renumbering.blocks(), old.len());
+        assert!(n > 2 * TASK_COLUMNS, "{n} blocks: more than one task");
+        let layout = SlicedLayout::new(blocks.columns(), n);
+        let (mut rounded, mut diagonals) = (vec![0.0f32; values.len()], vec![[0.0; 9]; n]);
+        let mut by_tasks = vec![f32::NAN; layout.values_len()];
+        let parts = AlongGroups { values: &mut by_tasks, layout: &layout, first: 0 };
+        let task = |columns: Range<usize>, task_values: &[f32], sliced: &mut AlongGroups<'_>| {
+            let groups = layout.groups_of(columns.clone());
+            layout.fill(task_values, blocks.start[columns.start], groups, sliced.values);
+        };
+        renumbering.round_values(&values, &mut rounded, &mut diagonals, |b| b, parts, task, |(), ()| ());
+        let mut whole = vec![f32::NAN; layout.values_len()];
+        layout.fill(&rounded, 0, 0..layout.groups(), &mut whole);
+        assert!(whole.iter().zip(&by_tasks).all(|(a, b)| a.to_bits() == b.to_bits()));
     }
 
     /// The old values read as the new columns ([`Renumbering::old_columns`])
@@ -854,7 +904,7 @@ mod tests {
         cleave_kernels::spmv::block_products(old.columns(), &values, &x_old, 0, &mut y_old);
         let (mut rounded, mut diagonals, mut y_new) = (vec![0.0f32; values.len()], vec![[0.0; 9]; n], vec![0.0; 3 * n]);
         let view = renumbering.old_columns();
-        let task = |columns: Range<usize>, y: &mut Along<f64>| {
+        let task = |columns: Range<usize>, _: &[f32], y: &mut Along<f64>| {
             cleave_kernels::spmv::block_products(view, &values, &x_new, columns.start, y.0);
             columns.len()
         };

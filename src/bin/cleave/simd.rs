@@ -252,7 +252,7 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
     // (and in the sliced layout the iteration takes its products in)
     let sliced = cleave_kernels::sliced::SlicedLayout::new(blocks.columns(), blocks.len());
     let mut sliced_values = vec![0.0f32; sliced.values_len()];
-    sliced.fill(&values, 0..sliced.groups(), &mut sliced_values);
+    sliced.fill(&values, 0, 0..sliced.groups(), &mut sliced_values);
     let (x_sliced, mut y_sliced) = (x.clone(), y.clone());
     let size_sliced = format!(
         "K of box_tet {}x{}x{}, {} f32 values, {} padded",
