@@ -15,13 +15,15 @@
 //! the values rounded to `f32`: a quarter of the bytes of a scalar `f64`
 //! product. The iteration takes its products in the sliced layout of
 //! `kernels/src/sliced.rs` (eight block columns side by side, one per
-//! SIMD lane), into which the values are written as they are rounded: on
-//! bunny_100k with its base clamped, CG to 1e-8 (2 cores, Intel Xeon,
-//! AVX-512, five runs of 20 steps of each alternated), the solve took 56
-//! ms per step (median) against 65 ms with the products on the column
-//! layout, for the same 55.7 iterations (and filling the sliced values in
-//! a pass of their own after a solve's fourth product, 3 ms more per step
-//! on one thread than writing them as they are rounded). The
+//! SIMD lane), into which the values are written as they are rounded
+//! when the solve before iterated ([`SLICED_FROM`]; else the products
+//! read the column layout): on bunny_100k with its base clamped, CG to
+//! 1e-8 (2 cores, Intel Xeon, AVX-512, five runs of 20 steps of each
+//! alternated), the solve took 56 ms per step (median) against 65 ms with
+//! the products on the column layout, for the same 55.7 iterations (and
+//! filling the sliced values in a pass of their own after a solve's
+//! fourth product, 3 ms more per step on one thread than writing them as
+//! they are rounded). The
 //! iteration's vectors stay `f64`,
 //! and the residual it must meet is taken with the `f64` values (see
 //! [`ConjugateGradient::solve`]). One pass per iteration updates `x` and
@@ -71,6 +73,14 @@ pub(super) const CHUNK_BLOCKS: usize = 1024;
 
 // (a chunk's product takes whole windows of the sliced layout)
 const _: () = assert!(CHUNK_BLOCKS % WINDOW == 0);
+
+/// Iterations of a solve from which the next solve's rounding pass writes
+/// the values sliced as well: the writes cost about what four sliced
+/// products save, which a body in free fall, no iteration or one per step,
+/// would pay for nothing (bunny_100k falling at 1e-6, 2 cores, Intel Xeon:
+/// the solve 11.7-15.2 ms per step without, 14.3-16.1 ms slicing at every
+/// solve, four alternated runs of 20 steps).
+const SLICED_FROM: usize = 4;
 
 /// PCG solver (see module docs).
 ///
@@ -124,10 +134,13 @@ pub struct ConjugateGradient {
     /// The layout of the iteration's products: the block structure sliced
     /// (`kernels/src/sliced.rs`), laid out for the current structure by the
     /// first solve on it (`sliced_laid`), and `values32` in it, written as
-    /// they are rounded.
+    /// they are rounded when the solve before iterated
+    /// ([`SLICED_FROM`]: `slice`), so current (`sliced_current`).
     sliced: SlicedLayout,
     sliced_values: Vec<f32>,
     sliced_laid: bool,
+    slice: bool,
+    sliced_current: bool,
     /// A vector in the caller's numbering, and its product.
     x_given: Vec<f64>,
     r_given: Vec<f64>,
@@ -505,6 +518,8 @@ impl ConjugateGradient {
             sliced: SlicedLayout::default(),
             sliced_values: Vec::new(),
             sliced_laid: false,
+            slice: true,
+            sliced_current: false,
             x_given: Vec::new(),
             r_given: Vec::new(),
             rounded: false,
@@ -576,9 +591,12 @@ impl ConjugateGradient {
         let sliced = AlongGroups { values: &mut self.sliced_values, layout, first: 0 };
         let parts = ((Along::columns(&mut self.r, 3), Along::columns(a_v, 3 * VECTORS)), sliced);
         type Parts<'a> = ((Along<'a, f64>, Along<'a, f64>), AlongGroups<'a>);
+        let slicing = self.slice;
         let task = |columns: Range<usize>, rounded: &[f32], ((r, a_v), sliced): &mut Parts<'_>| {
-            let groups = layout.groups_of(columns.clone());
-            layout.fill(rounded, starts[columns.start], groups, sliced.values);
+            if slicing {
+                let groups = layout.groups_of(columns.clone());
+                layout.fill(rounded, starts[columns.start], groups, sliced.values);
+            }
             let unknowns = 3 * columns.start..3 * columns.end;
             block_products(view, given, x, columns.start, r.0);
             r.0.iter_mut().zip(&b[unknowns.clone()]).for_each(|(r, b)| *r = b - *r);
@@ -605,7 +623,7 @@ impl ConjugateGradient {
             return Err(SolveError::NonFinite);
         }
         self.pending = false;
-        self.rounded = rounded;
+        (self.rounded, self.sliced_current) = (rounded, slicing);
         if rounded {
             self.values.clear();
         } else {
@@ -645,7 +663,7 @@ impl ConjugateGradient {
     }
 
     /// [`ConjugateGradient::matvec`] with `values32` in the sliced layout:
-    /// the iteration's product.
+    /// the iteration's product (when they were sliced, [`SLICED_FROM`]).
     fn sliced_matvec(&self, x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
         let (layout, values) = (&self.sliced, &self.sliced_values);
         y.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (yc, part))| {
@@ -707,7 +725,8 @@ impl ConjugateGradient {
     /// [`ConjugateGradient::matvec`]); returns `x · y`.
     fn product(&mut self, operator: Operator<'_>, x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
         match operator {
-            Operator::Rounded => self.sliced_matvec(x, y, partial),
+            Operator::Rounded if self.sliced_current => self.sliced_matvec(x, y, partial),
+            Operator::Rounded => self.matvec(&self.values32, x, y, partial),
             Operator::Copied(values) => self.matvec(values, x, y, partial),
             Operator::Caller(caller) => {
                 let x_ay = self.caller_product(caller, x, partial);
@@ -1208,7 +1227,7 @@ impl ConjugateGradient {
         // (every entry is written before it is read in a solve; the arrays
         // keep room for the next cuts, [`crate::reserve_room`])
         crate::resize_with_room(&mut self.values32, blocks.values_len(), 0.0);
-        self.sliced_laid = false;
+        (self.sliced_laid, self.sliced_current) = (false, false);
         self.values.clear();
         for v in [&mut self.b, &mut self.x, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.x_given] {
             crate::resize_with_room(v, n, 0.0);
@@ -1247,12 +1266,17 @@ impl ConjugateGradient {
         if !analysed || values.len() != self.values32.len() || b.len() != n || x.len() != n {
             return Err(SolveError::NotReady);
         }
+        // (no values given since the analysis: none laid out to iterate on)
+        if !self.pending && !self.sliced_laid {
+            return Err(SolveError::NotReady);
+        }
         let (mut b_own, mut x_own) = (std::mem::take(&mut self.b), std::mem::take(&mut self.x));
         self.numbering.to_new(as_blocks(b), as_blocks_mut(&mut b_own));
         self.numbering.to_new(as_blocks(x), as_blocks_mut(&mut x_own));
         let caller = Caller { structure: structure.columns(), values, b };
         let stats = self.solve_own(caller, &b_own, &mut x_own);
         self.coarse_age.solved(stats.as_ref().ok().map(|s| s.iterations));
+        self.slice = stats.as_ref().map_or(true, |s| s.iterations >= SLICED_FROM);
         self.numbering.to_old(as_blocks(&x_own), as_blocks_mut(x));
         (self.b, self.x) = (b_own, x_own);
         stats
@@ -1404,6 +1428,23 @@ mod tests {
         let mut cg = ConjugateGradient::new(1e-8, 100);
         assert!(cg.analyze_blocks(other.as_ref(), &read).is_err());
         assert!(cg.analyze_blocks(pattern.as_ref(), &read).is_ok());
+    }
+
+    /// A solve asked before any values were given since the analysis is
+    /// refused; given them, it solves.
+    #[test]
+    fn a_solve_before_the_values_is_refused() {
+        let (pattern, values) = chain(40, 1.0);
+        let matrix = SparseColMatRef::new(pattern.as_ref(), &values);
+        let (b, mut x) = (vec![1.0; pattern.nrows()], vec![0.0; pattern.nrows()]);
+        let mut cg = ConjugateGradient::new(1e-8, 100);
+        cg.analyze(pattern.as_ref()).unwrap();
+        assert_eq!(cg.solve(matrix, &b, &mut x), Err(SolveError::NotReady));
+        cg.factor(matrix).unwrap();
+        assert!(cg.solve(matrix, &b, &mut x).is_ok());
+        // (and again, after the analysis of the same pattern)
+        cg.analyze(pattern.as_ref()).unwrap();
+        assert_eq!(cg.solve(matrix, &b, &mut x), Err(SolveError::NotReady));
     }
 
     /// A symmetric positive definite chain of `n` 3x3 blocks in the layout
