@@ -217,6 +217,7 @@ impl SlicedLayout {
         assert_eq!(x.len(), 3 * self.blocks, "x of {} entries for {} blocks", x.len(), self.blocks);
         assert_eq!(values.len(), self.values_len(), "the layout's values");
         assert_eq!(groups, self.groups_of(first..first + y.len() / 3), "the groups of the columns of y");
+        let product = Product { values, x, groups, first, y: &mut *y };
         #[cfg(target_arch = "x86_64")]
         match level {
             // SAFETY: the level is available; every group's slots lie in
@@ -225,15 +226,13 @@ impl SlicedLayout {
             // was made.
             SimdLevel::Avx512 => {
                 let simd = pulp::x86::V4::try_new().expect("AVX-512 is available");
-                unsafe { x86::sums_avx512(simd, self, values, x, groups, first, y) }
+                unsafe { x86::sums_avx512(simd, self, product) }
             }
-            SimdLevel::Avx2 => unsafe { x86::sums_avx2(self, values, x, groups, first, y) },
-            SimdLevel::Scalar => {
-                self.write_sums(groups, first, y, |slots, sums| scalar_sums(&self.rows, values, x, slots, sums))
-            }
+            SimdLevel::Avx2 => unsafe { x86::sums_avx2(self, product) },
+            SimdLevel::Scalar => self.scalar_sums(product),
         }
         #[cfg(not(target_arch = "x86_64"))]
-        self.write_sums(groups, first, y, |slots, sums| scalar_sums(&self.rows, values, x, slots, sums));
+        self.scalar_sums(product);
         let mut dot = 0.0;
         for (q, yj) in y.chunks_exact(3).enumerate() {
             let j = 3 * (first + q);
@@ -243,7 +242,23 @@ impl SlicedLayout {
     }
 }
 
+/// A product's operands: the sliced `values` (of the whole layout) times
+/// `x` into `y`, for the groups `groups`, whose columns start at `first`.
+struct Product<'a> {
+    values: &'a [f32],
+    x: &'a [f64],
+    groups: Range<usize>,
+    first: usize,
+    y: &'a mut [f64],
+}
+
 impl SlicedLayout {
+    /// The sums of `product` by [`scalar_sums`].
+    fn scalar_sums(&self, product: Product<'_>) {
+        let Product { values, x, groups, first, y } = product;
+        self.write_sums(groups, first, y, |slots, sums| scalar_sums(&self.rows, values, x, slots, sums));
+    }
+
     /// Writes the sums `group_sums(slots, sums)` makes of each group of
     /// `groups` to its lanes' columns of `y` (which starts at block column
     /// `first`).
@@ -295,7 +310,7 @@ fn scalar_sums(rows: &[u32], values: &[f32], x: &[f64], slots: Range<usize>, sum
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::{SlicedLayout, LANES};
+    use super::{Product, SlicedLayout, LANES};
     use core::arch::x86_64::*;
     use core::ops::Range;
 
@@ -306,37 +321,25 @@ mod x86 {
     /// # Safety
     /// The groups' slots lie within the layout's rows and `values`, and
     /// every row `3 i` of them has `x[3 i + 2]`.
-    pub(super) unsafe fn sums_avx512(
-        simd: pulp::x86::V4,
-        layout: &SlicedLayout,
-        values: &[f32],
-        x: &[f64],
-        groups: Range<usize>,
-        first: usize,
-        y: &mut [f64],
-    ) {
+    pub(super) unsafe fn sums_avx512(simd: pulp::x86::V4, layout: &SlicedLayout, product: Product<'_>) {
         struct Sums<'a> {
             simd: pulp::x86::V4,
             layout: &'a SlicedLayout,
-            values: &'a [f32],
-            x: &'a [f64],
-            groups: Range<usize>,
-            first: usize,
-            y: &'a mut [f64],
+            product: Product<'a>,
         }
         impl pulp::WithSimd for Sums<'_> {
             type Output = ();
 
             #[inline(always)]
             fn with_simd<S: pulp::Simd>(self, _: S) {
-                let Sums { simd, layout, values, x, groups, first, y } = self;
+                let Sums { simd, layout, product: Product { values, x, groups, first, y } } = self;
                 // SAFETY: as the caller of `sums_avx512` promised
                 layout.write_sums(groups, first, y, |slots, sums| unsafe {
                     group_sums_avx512(simd, &layout.rows, values, x, slots, sums)
                 });
             }
         }
-        pulp::Simd::vectorize(simd, Sums { simd, layout, values, x, groups, first, y });
+        pulp::Simd::vectorize(simd, Sums { simd, layout, product });
     }
 
     /// [`SlicedLayout::write_sums`] with [`group_sums_avx2`].
@@ -344,14 +347,8 @@ mod x86 {
     /// # Safety
     /// As [`sums_avx512`], with AVX2 available.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn sums_avx2(
-        layout: &SlicedLayout,
-        values: &[f32],
-        x: &[f64],
-        groups: Range<usize>,
-        first: usize,
-        y: &mut [f64],
-    ) {
+    pub(super) unsafe fn sums_avx2(layout: &SlicedLayout, product: Product<'_>) {
+        let Product { values, x, groups, first, y } = product;
         layout.write_sums(groups, first, y, |slots, sums| group_sums_avx2(&layout.rows, values, x, slots, sums));
     }
 
