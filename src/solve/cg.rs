@@ -23,9 +23,8 @@
 //! the products on the column layout, for the same 55.7 iterations (and
 //! filling the sliced values in a pass of their own after a solve's
 //! fourth product, 3 ms more per step on one thread than writing them as
-//! they are rounded). The
-//! iteration's vectors stay `f64`,
-//! and the residual it must meet is taken with the `f64` values (see
+//! they are rounded). The iteration's vectors stay `f64`, and the
+//! residual it must meet is taken with the `f64` values (see
 //! [`ConjugateGradient::solve`]). One pass per iteration updates `x` and
 //! `r`, applies the preconditioner and forms both dot products; the product
 //! forms `p · A p`. Sums run over fixed chunks in parallel and the chunk
@@ -225,9 +224,10 @@ struct Caller<'a> {
     b: &'a [f64],
 }
 
-/// The matrix an iteration's products take: the values rounded to `f32` in
-/// the solver's sliced layout; the solver's `f64` copy of a matrix beyond `f32`'s
-/// range; or, for the rare round that needs the exact values (the rounded
+/// The matrix an iteration's products take: the values rounded to `f32`
+/// (in the solver's sliced layout, or its column layout when they were not
+/// sliced); the solver's `f64` copy of a matrix beyond `f32`'s range; or,
+/// for the rare round that needs the exact values (the rounded
 /// ones stalled), the caller's `f64` values on its structure, the vectors
 /// carried to its numbering and back (no copy of 18 MB on bunny_100k kept
 /// for it, to be sized at every cut).
