@@ -197,26 +197,18 @@ impl SlicedLayout {
     }
 
     /// `y_j = (A x)_j` for the block columns `first..first + y.len() / 3`,
-    /// which are those of `groups` ([`SlicedLayout::groups_of`]), with the
-    /// sliced `values` of all groups; returns `Σ_j x_j · y_j` over those
-    /// columns, summed in order.
-    pub fn products(&self, values: &[f32], x: &[f64], groups: Range<usize>, first: usize, y: &mut [f64]) -> f64 {
-        self.products_at(dispatched_level(SimdLevel::Avx512), values, x, groups, first, y)
+    /// which start and end at windows or at the last block column
+    /// ([`SlicedLayout::groups_of`]), with the sliced `values` of all
+    /// groups; returns `Σ_j x_j · y_j` over those columns, summed in order.
+    pub fn products(&self, values: &[f32], x: &[f64], first: usize, y: &mut [f64]) -> f64 {
+        self.products_at(dispatched_level(SimdLevel::Avx512), values, x, first, y)
     }
 
     /// [`SlicedLayout::products`] at the instruction set `level`.
-    fn products_at(
-        &self,
-        level: SimdLevel,
-        values: &[f32],
-        x: &[f64],
-        groups: Range<usize>,
-        first: usize,
-        y: &mut [f64],
-    ) -> f64 {
+    fn products_at(&self, level: SimdLevel, values: &[f32], x: &[f64], first: usize, y: &mut [f64]) -> f64 {
         assert_eq!(x.len(), 3 * self.blocks, "x of {} entries for {} blocks", x.len(), self.blocks);
         assert_eq!(values.len(), self.values_len(), "the layout's values");
-        assert_eq!(groups, self.groups_of(first..first + y.len() / 3), "the groups of the columns of y");
+        let groups = self.groups_of(first..first + y.len() / 3);
         let product = Product { values, x, groups, first, y: &mut *y };
         #[cfg(target_arch = "x86_64")]
         match level {
@@ -445,8 +437,7 @@ mod tests {
             let layout = SlicedLayout::new(BlockColumns { ptr: &ptr, rows: &rows, start: &start }, n);
             let values32: Vec<f32> = values.iter().map(|&v| v as f32).collect();
             let mut sliced = vec![f32::NAN; layout.values_len()];
-            let groups = layout.groups_of(0..n);
-            layout.fill(&values32, 0, groups.clone(), &mut sliced);
+            layout.fill(&values32, 0, layout.groups_of(0..n), &mut sliced);
             let x: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.7).sin()).collect();
             // the rounded values' exact product, and the scale of its rounding
             let rounded = |i: usize, j: usize| f64::from(dense[i][j] as f32);
@@ -457,8 +448,8 @@ mod tests {
             for level in crate::lanes::levels::available("sliced") {
                 let mut y = vec![0.0; 3 * n];
                 let (head, tail) = y.split_at_mut(3 * split);
-                let dot = layout.products_at(level, &sliced, &x, layout.groups_of(0..split), 0, head)
-                    + layout.products_at(level, &sliced, &x, layout.groups_of(split..n), split, tail);
+                let dot = layout.products_at(level, &sliced, &x, 0, head)
+                    + layout.products_at(level, &sliced, &x, split, tail);
                 for (i, &got) in y.iter().enumerate() {
                     assert!((got - want[i]).abs() <= 1e-14 * scale[i], "{level:?}: y[{i}] = {got}, dense {}", want[i]);
                 }

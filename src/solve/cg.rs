@@ -667,8 +667,7 @@ impl ConjugateGradient {
     fn sliced_matvec(&self, x: &[f64], y: &mut [f64], partial: &mut [f64]) -> f64 {
         let (layout, values) = (&self.sliced, &self.sliced_values);
         y.par_chunks_mut(3 * CHUNK_BLOCKS).zip(partial.par_iter_mut()).enumerate().for_each(|(c, (yc, part))| {
-            let columns = c * CHUNK_BLOCKS..c * CHUNK_BLOCKS + yc.len() / 3;
-            *part = layout.products(values, x, layout.groups_of(columns.clone()), columns.start, yc);
+            *part = layout.products(values, x, c * CHUNK_BLOCKS, yc);
         });
         partial.iter().sum()
     }

@@ -858,15 +858,21 @@ mod tests {
         (finite, in_range)
     }
 
+    /// [`shuffled_grid`]`(m)`, values for it, and its renumbering.
+    fn renumbered_grid(m: usize) -> (BlockStructure, Vec<f64>, Renumbering) {
+        let old = shuffled_grid(m);
+        let values: Vec<f64> = (0..9 * old.rows_len()).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.01).collect();
+        let mut renumbering = Renumbering::default();
+        renumbering.renew(&old);
+        (old, values, renumbering)
+    }
+
     /// The tasks of a rounding pass each slice their own columns' values
     /// (split at windows of the sliced layout): together, the values of
     /// the whole rounded matrix sliced in one go.
     #[test]
     fn the_tasks_slice_the_rounded_values_as_a_whole_fill_does() {
-        let old = shuffled_grid(9);
-        let values: Vec<f64> = (0..9 * old.rows_len()).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.01).collect();
-        let mut renumbering = Renumbering::default();
-        renumbering.renew(&old);
+        let (old, values, renumbering) = renumbered_grid(9);
         let (blocks, n) = (renumbering.blocks(), old.len());
         assert!(n > 2 * TASK_COLUMNS, "{n} blocks: more than one task");
         let layout = SlicedLayout::new(blocks.columns(), n);
@@ -890,10 +896,7 @@ mod tests {
     /// tasks' results combine over every column once.
     #[test]
     fn products_on_the_old_values_in_the_new_numbering_are_the_old_products() {
-        let old = shuffled_grid(6);
-        let values: Vec<f64> = (0..9 * old.rows_len()).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.01).collect();
-        let mut renumbering = Renumbering::default();
-        renumbering.renew(&old);
+        let (old, values, renumbering) = renumbered_grid(6);
         let n = old.len();
         let x_old: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.37).sin()).collect();
         let mut x_new = vec![[0.0; 3]; n];

@@ -274,8 +274,7 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
         },
     ));
     kernels.push(Kernel::one_lane("sliced block sparse product", size_sliced, move || {
-        let groups = 0..sliced.groups();
-        let run = || sliced.products(&sliced_values, &x_sliced, groups.clone(), 0, &mut y_sliced);
+        let run = || sliced.products(&sliced_values, &x_sliced, 0, &mut y_sliced);
         let (ms, _) = best_ms(5 * scale, run);
         ms
     }));
