@@ -84,23 +84,28 @@ pub(crate) fn in_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 }
 
 /// The room an array sized by a body's topology keeps for the growth cuts
-/// bring, as a part of its length: an eighth when it is first sized (the
-/// first cuts fit), half when a cut outgrows it (cuts come in series: a
-/// swept blade adds about 2.5 % to bunny_100k's arrays per cut). Growing
-/// copies the whole array and faults in its pages: without the room, the
-/// first blade cut across bunny_100k took 40-50 ms more than the next (the
-/// step system's and CG's values, the coarse level's runs), and with an
-/// eighth at every growth every fifth cut took 15-25 ms more.
-const FIRST_ROOM: usize = 8;
-const GROWN_ROOM: usize = 2;
+/// bring, as a part of its length: half, when it is first sized and each
+/// time a cut outgrows it (a swept blade adds about 2.5 % to bunny_100k's
+/// arrays per cut). Growing copies the whole array and faults in its
+/// pages, while room never written costs address space only. With an
+/// eighth to spare when first sized, the third of six blade cuts across
+/// bunny_100k took 32-49 ms where the second took 21-33 (the step
+/// system's, the solver's and the coarse level's arrays outgrown), and
+/// 24-33 ms with half (AMD EPYC Zen 4, 2 threads, eight runs alternated).
+const ROOM: usize = 2;
 
-/// Makes `array`'s capacity at least `len`, with the room of [`FIRST_ROOM`]
-/// and [`GROWN_ROOM`] when it grows.
+/// Makes `array`'s capacity at least `len`, with [`ROOM`] to spare when
+/// it grows.
 pub(crate) fn reserve_room<T>(array: &mut Vec<T>, len: usize) {
     if len > array.capacity() {
-        let room = if array.capacity() == 0 { len / FIRST_ROOM } else { len / GROWN_ROOM };
-        array.reserve_exact(len + room - array.len());
+        array.reserve_exact(len + len / ROOM - array.len());
     }
+}
+
+/// Gives `array`, sized elsewhere (a mesh as read), the room
+/// [`reserve_room`] gives.
+pub(crate) fn keep_room<T>(array: &mut Vec<T>) {
+    array.reserve_exact(array.len() / ROOM);
 }
 
 /// Sets `array`'s length to `len` (new items `fill`) after
@@ -174,21 +179,25 @@ mod tests {
         assert_eq!(values, [1, 1, 3, 3, 3, 0, 0]);
     }
 
-    /// An array first sized keeps an eighth to spare, so growth within it
-    /// stays in place; one outgrown takes half its length to spare; new
-    /// items take the fill, old ones stay.
+    /// An array sized keeps half its length to spare, so growth within it
+    /// stays in place; one outgrown takes half its new length to spare;
+    /// new items take the fill, old ones stay; an array sized elsewhere
+    /// takes the same room.
     #[test]
     fn arrays_keep_room_for_growth() {
         let mut array: Vec<u32> = Vec::new();
         super::resize_with_room(&mut array, 800, 7);
-        assert_eq!((array.len(), array.capacity()), (800, 900));
+        assert_eq!((array.len(), array.capacity()), (800, 1200));
         let first = array.as_ptr();
-        super::resize_with_room(&mut array, 900, 8);
-        assert_eq!((array.as_ptr(), array.capacity()), (first, 900), "growth within the room stays in place");
-        super::resize_with_room(&mut array, 1000, 9);
-        assert_eq!(array.capacity(), 1500);
-        assert_eq!((array[799], array[800], array[899], array[900], array[999]), (7, 8, 8, 9, 9));
+        super::resize_with_room(&mut array, 1200, 8);
+        assert_eq!((array.as_ptr(), array.capacity()), (first, 1200), "growth within the room stays in place");
+        super::resize_with_room(&mut array, 1300, 9);
+        assert_eq!(array.capacity(), 1950);
+        assert_eq!((array[799], array[800], array[1199], array[1200], array[1299]), (7, 8, 8, 9, 9));
         super::resize_with_room(&mut array, 10, 0);
-        assert_eq!((array.len(), array.capacity()), (10, 1500), "shrinking keeps the memory");
+        assert_eq!((array.len(), array.capacity()), (10, 1950), "shrinking keeps the memory");
+        let mut read = vec![1u8; 300];
+        super::keep_room(&mut read);
+        assert!(read.capacity() >= 450, "{}", read.capacity());
     }
 }
