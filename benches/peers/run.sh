@@ -6,8 +6,10 @@
 #
 # Makes a virtual environment in target/peers-venv with pinned versions from
 # PyPI. scikit-sparse builds against the system's CHOLMOD: on Debian 12,
-# `apt-get install libsuitesparse-dev` (SuiteSparse 5, hence scikit-sparse
-# 0.4.16; 0.5 needs SuiteSparse 7). Not part of CI.
+# `apt-get install libsuitesparse-dev libopenblas0-pthread` (SuiteSparse 5,
+# hence scikit-sparse 0.4.16; 0.5 needs SuiteSparse 7; with the reference
+# BLAS, CHOLMOD's numeric factorisation runs about ten times slower). Not
+# part of CI.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 mesh="${1:-assets/bunny_100k.mesh}"
