@@ -23,8 +23,8 @@
 //! with zero blocks on their own row. To keep that padding small, the
 //! columns of each window of [`WINDOW`] columns are dealt to the lanes
 //! longest first (on bunny_100k in the solver's numbering: 7.7% padding,
-//! against 23% in the given order). The order within a window is the layout's alone: the product
-//! writes each lane's sums to its own column.
+//! against 23% in the given order). The order within a window is the
+//! layout's alone: the product writes each lane's sums to its own column.
 //!
 //! Every lane sums its column's terms in one fixed order, the even slots
 //! and the odd slots in two running sums (the dependent additions of one
@@ -39,9 +39,10 @@
 //! at AVX2, 0.30–0.31 ms with the same loads into 512-bit vectors and
 //! 0.49 ms with 512-bit hardware gathers of `x` (three per slot), which
 //! the bunny's steps used until then: at 1e-8 the clamped body's solve
-//! took 28.5–30.5 ms per step at AVX2 against 35.2–47.9 ms with the
-//! gathers (`cleave bench --only steps`, alternated). Three gathers of a
-//! slot's four lanes issue twelve loads, where the pairs take eight.
+//! took 28.8–30.8 ms per step at AVX2 against 33.2–44.1 ms with the
+//! gathers (`cleave bench --only steps`, renumbered, three runs
+//! alternated with the gathering binary). Three gathers of a slot's four
+//! lanes issue twelve loads, where the pairs take eight.
 
 use core::ops::Range;
 
