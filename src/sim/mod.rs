@@ -85,7 +85,9 @@ use crate::Error;
 /// static solve after deserialization, as after a cut.
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct Simulation {
-    /// The mesh in its rest configuration.
+    /// The mesh in its rest configuration (with room for cuts, also as
+    /// deserialized: see [`with_room_for_cuts`]).
+    #[serde(deserialize_with = "deserialize_with_room")]
     mesh: PolyMesh,
     params: SimulationParams,
     /// Element data and per-element state.
@@ -204,6 +206,28 @@ fn nodal_masses(store: &ElementStore, pattern: &SparsePattern, density: f64) -> 
     (0..pattern.num_blocks).into_par_iter().map(|v| store.lumped_mass(pattern.held_at(v), density)).collect()
 }
 
+/// Gives `mesh` room for the elements, faces and nodes cuts add
+/// ([`crate::keep_room`]): a mesh read from a file or a checkpoint has
+/// none, and the first blade cut across bunny_100k doubled its faces and
+/// elements (about 30 MB), copying them and faulting in their pages:
+/// 33-50 ms, 21-24 ms with the room (AMD EPYC Zen 4).
+fn with_room_for_cuts(mesh: &mut PolyMesh) {
+    crate::keep_room(&mut mesh.elements);
+    crate::keep_room(&mut mesh.faces);
+    crate::keep_room(&mut mesh.nodes);
+}
+
+/// A simulation's mesh as deserialized, [`with_room_for_cuts`]. (The
+/// other topology-sized arrays, of the element store, the pattern and the
+/// node state, are read without room: the first cut after a resume grows
+/// them, and took 45-80 ms on bunny_100k against 25-35 ms for the first
+/// cut of a simulation built afresh, AMD EPYC Zen 4.)
+fn deserialize_with_room<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<PolyMesh, D::Error> {
+    let mut mesh = <PolyMesh as serde::Deserialize>::deserialize(deserializer)?;
+    with_room_for_cuts(&mut mesh);
+    Ok(mesh)
+}
+
 /// The rest positions of the blocks: the mesh nodes, or the coefficients
 /// of the identity map.
 fn rest<'a>(mesh: &'a PolyMesh, elements: &'a Model) -> &'a [[f64; 3]] {
@@ -221,14 +245,7 @@ impl Simulation {
     pub fn new(mut mesh: PolyMesh, params: SimulationParams) -> Result<Self, Error> {
         params.check()?;
         mesh.validate()?;
-        // room for the elements, faces and nodes cuts add
-        // ([`crate::keep_room`]): a mesh read from a file has none, and
-        // the first blade cut across bunny_100k doubled its faces and
-        // elements (about 30 MB), copying them and faulting in their
-        // pages: 33-50 ms, 21-24 ms with the room (AMD EPYC Zen 4)
-        crate::keep_room(&mut mesh.elements);
-        crate::keep_room(&mut mesh.faces);
-        crate::keep_room(&mut mesh.nodes);
+        with_room_for_cuts(&mut mesh);
         let mut timings = PhaseTimings::default();
         let store = timings.time(Phase::Basis, || ElementStore::build(&mesh, &params.material, &params.basis))?;
         let density = params.material.density;

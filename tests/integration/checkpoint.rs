@@ -165,3 +165,26 @@ fn damaged_checkpoints_are_refused_by_name() {
     assert!(refuse(&newer).contains("format version"));
     assert!(refuse(b"[mesh]\n").contains("not a cleave checkpoint"));
 }
+
+/// A simulation keeps room in its mesh for what cuts add, built or read
+/// back from a checkpoint alike: without it, the first cut after a resume
+/// copies the whole mesh into larger arrays.
+#[test]
+fn a_resumed_simulation_keeps_room_for_cuts() {
+    let mesh = cleave::meshing::box_tet([0.0; 3], [1.0; 3], [4, 4, 4]).unwrap();
+    let sim = cleave::sim::Simulation::new(mesh, Default::default()).unwrap();
+    let path = std::env::temp_dir().join(format!("cleave_room_{}.bin", std::process::id()));
+    cleave::checkpoint::write(&path, &sim).unwrap();
+    let read: cleave::sim::Simulation = cleave::checkpoint::read(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    for (label, sim) in [("built", &sim), ("read", &read)] {
+        let mesh = sim.mesh();
+        for (array, len, capacity) in [
+            ("elements", mesh.elements.len(), mesh.elements.capacity()),
+            ("faces", mesh.faces.len(), mesh.faces.capacity()),
+            ("nodes", mesh.nodes.len(), mesh.nodes.capacity()),
+        ] {
+            assert!(capacity >= len + len / 2, "{label}: {array} {len} with capacity {capacity}");
+        }
+    }
+}
