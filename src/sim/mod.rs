@@ -220,7 +220,7 @@ fn with_room_for_cuts(mesh: &mut PolyMesh) {
 /// A simulation's mesh as deserialized, [`with_room_for_cuts`]. (The
 /// other topology-sized arrays, of the element store, the pattern and the
 /// node state, are read without room: the first cut after a resume grows
-/// them, and took 45-80 ms on bunny_100k against 25-35 ms for the first
+/// them, and took 45-80 ms on bunny_100k against 25-30 ms for the first
 /// cut of a simulation built afresh, AMD EPYC Zen 4.)
 fn deserialize_with_room<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<PolyMesh, D::Error> {
     let mut mesh = <PolyMesh as serde::Deserialize>::deserialize(deserializer)?;
