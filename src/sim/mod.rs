@@ -60,7 +60,7 @@ use crate::assembly::SparsePattern;
 use crate::dg::DgElements;
 use crate::mesh::PolyMesh;
 use crate::param::ParamError;
-use crate::solve::SolveError;
+use crate::solve::{SolveError, SolverKind};
 use crate::store::{ElementStore, Family};
 use crate::Error;
 
@@ -132,6 +132,12 @@ pub struct Simulation {
     /// Cuts run again with one more element kept whole (see
     /// [`CUT_ATTEMPTS`]).
     cut_retries: usize,
+    /// [`SolverKind::Auto`]'s CG went past its budget, and the steps are
+    /// solved by Cholesky since (see [`Simulation::solver_kind`]).
+    solver_fell_back: bool,
+    /// The running mean of [`SolverKind::Auto`]'s CG iterations per step
+    /// (from 0, the newest step weighing a sixteenth).
+    auto_cg_iterations: f64,
     /// For every node, an upper bound of the diameters of the elements
     /// holding it (m), found on the first cut and raised by every change
     /// after it: how far from a cut the elements it looks at can lie.
@@ -282,6 +288,8 @@ impl Simulation {
             steps: 0,
             part_floor,
             cut_retries: 0,
+            solver_fell_back: false,
+            auto_cg_iterations: 0.0,
             node_diameters: None,
             faces_integrated: 0,
             refine_levels: Vec::new(),
@@ -339,7 +347,7 @@ impl Simulation {
         self.contacts = Some(dg.contact_points(mesh));
         self.nodes.refresh(&self.state);
         let p = &self.params;
-        self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+        self.system = StepSystem::new(self.solver_kind(), &self.pattern, p.tolerance, p.max_iterations);
         self.statics = None;
         self.refresh_body_loads();
         self.refresh_embedding()
@@ -625,6 +633,17 @@ impl Simulation {
     /// whole, because the element store found a part it made unhealthy.
     pub fn cut_retries(&self) -> usize {
         self.cut_retries
+    }
+
+    /// The solver the steps use: the parameters' [`SolverKind`], or
+    /// [`SolverKind::Cholesky`] once [`SolverKind::Auto`]'s CG has gone
+    /// past its budget ([`crate::solve::auto_cg_budget`]).
+    pub fn solver_kind(&self) -> SolverKind {
+        if self.solver_fell_back {
+            SolverKind::Cholesky
+        } else {
+            self.params.solver
+        }
     }
 
     /// How many faces the cuts of a DG body integrated again (the others

@@ -171,6 +171,7 @@ impl Simulation {
         let check = |mesh: &PolyMesh| mesh.check_elements(&list, &ValidationOptions::default());
         // the negative part of a split element inherits from its positive part
         let parents: Vec<(u32, u32)> = cut.split.split_elements.iter().map(|&(kept, new)| (new, kept)).collect();
+        let kind = self.solver_kind();
         let nodal = match &mut self.elements {
             Model::Nodal(nodal) => nodal,
             Model::Dg(_) => {
@@ -207,7 +208,7 @@ impl Simulation {
                     let update = timed(|| pattern.update(n, &elements_of, touched, &cut.old_nodes));
                     // (an analysis that fails is run again, and reported, by the caller)
                     let analysis = timed(|| {
-                        system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
+                        system.renew(kind, pattern, p.tolerance, p.max_iterations);
                         let _analysed = system.ensure_analysed(pattern);
                     });
                     (update, analysis)
@@ -228,7 +229,7 @@ impl Simulation {
                 let now: Vec<u32> = touched.iter().flat_map(|&e| elements_of(e).iter().copied()).collect();
                 let undo = pattern.update(cut.nodes_before as usize, &|e| store.element_nodes(e), touched, &now);
                 pattern.locate(store, undo);
-                system.renew(p.solver, pattern, p.tolerance, p.max_iterations);
+                system.renew(kind, pattern, p.tolerance, p.max_iterations);
                 return Err(error);
             }
         };

@@ -17,7 +17,7 @@
 use rayon::prelude::*;
 
 use crate::assembly::{Constraints, SparsePattern};
-use crate::solve::{make_solver, LinearSolver, SolveError, SolveStats, SolverChoice, SolverKind};
+use crate::solve::{auto_cg_budget, make_solver, LinearSolver, SolveError, SolveStats, SolverChoice, SolverKind};
 use crate::Error;
 
 use super::{rest, Boundary, Discretization, NodeState, Phase, PointMap, Simulation};
@@ -153,8 +153,12 @@ impl Simulation {
     fn advance(&mut self) -> Result<StepStats, SolveError> {
         if !self.system.fits(&self.pattern) {
             let p = &self.params;
-            self.system = StepSystem::new(p.solver, &self.pattern, p.tolerance, p.max_iterations);
+            self.system = StepSystem::new(self.solver_kind(), &self.pattern, p.tolerance, p.max_iterations);
         }
+        // (whether CG going past its budget hands the steps to Cholesky)
+        let n = 3 * self.pattern.num_blocks;
+        let may_fall_back =
+            self.solver_kind() == SolverKind::Auto && SolverChoice::of(SolverKind::Auto, n) == SolverChoice::Cg;
         let h = self.params.dt;
         let (c_k, c_m) = (h * h + h * self.params.stiffness_damping, 1.0 + h * self.params.mass_damping);
         let (pattern, system, timings) = (&self.pattern, &mut self.system, &mut self.timings);
@@ -181,7 +185,28 @@ impl Simulation {
             constrain(pattern, boundary, nodal.then_some(&self.mesh.nodes[..]), masses, state, h, system)
         });
         // 5.
-        let solve = timings.time(Phase::Solve, || solve(elements, pattern, masses, state, nodal, c_m, c_k, system))?;
+        let mut solve_step = |system: &mut StepSystem| {
+            timings.time(Phase::Solve, || solve(elements, pattern, masses, state, nodal, c_m, c_k, system))
+        };
+        let (p, average) = (&self.params, &mut self.auto_cg_iterations);
+        let solve = match solve_step(system) {
+            // the same step again, by Cholesky, and every step after it
+            Err(SolveError::NotConverged { .. }) if may_fall_back => {
+                self.solver_fell_back = true;
+                system.renew(SolverKind::Cholesky, pattern, p.tolerance, p.max_iterations);
+                solve_step(system)?
+            }
+            Ok(stats) if may_fall_back => {
+                *average += (stats.iterations as f64 - *average) / 16.0;
+                if *average > auto_cg_budget(n) as f64 {
+                    // (the coming steps: the system keeps its buffers)
+                    self.solver_fell_back = true;
+                    system.renew(SolverKind::Cholesky, pattern, p.tolerance, p.max_iterations);
+                }
+                stats
+            }
+            solved => solved?,
+        };
         // 6.
         let (state, nodes, rest) = (&mut self.state, &mut self.nodes, rest(&self.mesh, &self.elements));
         timings.time(Phase::Integrate, || {

@@ -211,11 +211,22 @@ pub trait LinearSolver: Send + Sync {
 /// The solvers a simulation can use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SolverKind {
-    /// [`SolverKind::Cholesky`] up to [`AUTO_CHOLESKY_MAX_UNKNOWNS`]
-    /// unknowns, CG above (measured with `cleave bench`: on the 100k-tet
-    /// bunny, 53k unknowns, a CG step takes ~0.035 s and a refactorising
-    /// Cholesky step ~0.55 s with its parallel factor, 2 cores; on
-    /// bunny_5k, 6.5k unknowns, Cholesky steps in 8 ms, CG in 10).
+    /// The envelope Cholesky up to [`ENVELOPE_MAX_UNKNOWNS`] unknowns, CG
+    /// above, until CG proves slow: a dynamic simulation hands its steps
+    /// to [`SolverKind::Cholesky`] for good when CG's running mean of
+    /// iterations per step passes [`auto_cg_budget`], or when a step's CG
+    /// does not converge (that step is solved again, by Cholesky); static
+    /// solves take Cholesky. Measured per step (2 cores, AMD EPYC Zen 4),
+    /// a refactorising Cholesky against CG: 15.5 against 2.8-3.8 ms on
+    /// bunny_5k (6.4k unknowns) for E = 1e5 to 1e9 Pa and soft contacts,
+    /// 22 against 5-7 ms on a box of 14x10x8 hexahedra, 24 against 8.9 ms
+    /// over the first 60 steps of `dg_bunny_from_cube`; over `bunny_cut`
+    /// Cholesky alone and CG alone tied (22.8 and 23.1 ms a step, its
+    /// stiff contacts taking CG 110 iterations a step) and Auto took
+    /// 17.7-18.3 ms, CG while the bunny falls and Cholesky after. CG took
+    /// 1.5 times as long at ν = 0.49, and did not converge on a beam of
+    /// 40x2x2 hexahedra at E = 1e10 Pa. On the 100k-tet bunny (60k unknowns)
+    /// a CG step takes ~0.035 s and a refactorising Cholesky step ~0.55 s.
     #[default]
     Auto,
     /// Direct Cholesky, refactorised whenever the matrix changes: the
@@ -242,8 +253,21 @@ pub enum SolverKind {
     CgRest,
 }
 
-/// Largest system that [`SolverKind::Auto`] solves by Cholesky.
-pub const AUTO_CHOLESKY_MAX_UNKNOWNS: usize = 30_000;
+/// The iterations per step, on average, that [`SolverKind::Auto`]'s CG
+/// may take on a system of `unknowns` unknowns before the steps go to
+/// Cholesky: `unknowns / 100`, at least 40. Below where a CG step costs
+/// as much as a refactorising Cholesky one (measured: ~35 iterations at
+/// 1.4k unknowns, 70-95 at 6.4k, ~110 at 14k, ~1,100 at 60k), so that the
+/// conditioning CG is slow on costs at most about one Cholesky step more
+/// than it would. The mean starts from 0 and weighs the newest step a
+/// sixteenth (about the last sixteen steps), so that a few steps that
+/// take more (the first ones, a contact coming on) do not end CG: a body
+/// of 10x6x5 hexahedra (1.4k unknowns) landing at h = 0.02 s took 25
+/// iterations a step, 42 and 43 on two. Counts, not times: the choice is
+/// the same on every machine and thread count.
+pub fn auto_cg_budget(unknowns: usize) -> usize {
+    (unknowns / 100).max(40)
+}
 
 /// Largest system that [`SolverKind::Cholesky`] factorises in its envelope.
 /// Measured (factor and solve of a step's matrix, AMD EPYC with AVX-512,
@@ -279,7 +303,6 @@ impl SolverChoice {
             {
                 SolverChoice::Envelope
             }
-            SolverKind::Auto if unknowns <= AUTO_CHOLESKY_MAX_UNKNOWNS => SolverChoice::Sparse,
             SolverKind::Cholesky | SolverKind::SparseCholesky => SolverChoice::Sparse,
             SolverKind::LaggedCholesky => SolverChoice::Lagged,
             SolverKind::Auto | SolverKind::Cg => SolverChoice::Cg,

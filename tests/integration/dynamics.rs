@@ -5,7 +5,7 @@
 use cleave::material::Material;
 use cleave::mesh::Plane;
 use cleave::mesh::PolyMesh;
-use cleave::meshing::{box_tet, random_convex};
+use cleave::meshing::{box_hex, box_tet, random_convex};
 use cleave::sim::{Collider, Simulation, SimulationParams};
 use cleave::solve::SolverKind;
 
@@ -370,4 +370,45 @@ fn stretched_and_turned_body_stores_the_energy_of_its_strain() {
         // 1e-13 of it, the rotation extraction a little more
         assert!((energy - expected).abs() <= 1e-9 * expected, "{energy} J against {expected} J");
     }
+}
+
+/// [`SolverKind::Auto`] steps a well-conditioned body by CG and keeps CG;
+/// it hands the steps to Cholesky for good where CG alone does not
+/// converge (a thin beam at E = 1e10 Pa resting on a soft floor: that step
+/// is solved again) and where CG takes many iterations step after step
+/// (ν = 0.49), also in a simulation read back from a checkpoint.
+#[test]
+fn auto_hands_the_steps_cg_is_slow_on_to_cholesky() {
+    let body = |dims: [usize; 3], young: f64, poisson: f64, solver: SolverKind| {
+        let size = dims.map(|n| 0.2 * n as f64);
+        let mesh = box_hex([0.0; 3], size, dims).unwrap();
+        let material = Material::new(young, poisson, 1000.0).unwrap();
+        let params = SimulationParams { material, gravity: [0.0, 0.0, -9.81], dt: 0.02, solver, ..Default::default() };
+        let mut sim = Simulation::new(mesh, params).unwrap();
+        sim.add_collider(Collider::new([0.0, 0.0, -0.05], [0.0, 0.1, 1.0], 1e6).unwrap());
+        sim
+    };
+    let (beam, block) = ([40, 2, 2], [10, 6, 5]);
+    let mut cg = body(beam, 1e10, 0.35, SolverKind::Cg);
+    let failed = (0..20).map(|_| cg.step()).find_map(Result::err);
+    assert!(failed.as_ref().is_some_and(|e| e.to_string().contains("did not converge")), "{failed:?}");
+    let mut stiff = body(beam, 1e10, 0.35, SolverKind::Auto);
+    let mut nearly_incompressible = body(block, 1e7, 0.49, SolverKind::Auto);
+    for sim in [&mut stiff, &mut nearly_incompressible] {
+        for _ in 0..20 {
+            sim.step().unwrap();
+        }
+        assert_eq!(sim.solver_kind(), SolverKind::Cholesky);
+    }
+    let path = std::env::temp_dir().join(format!("cleave_fallback_{}.bin", std::process::id()));
+    cleave::checkpoint::write(&path, &stiff).unwrap();
+    let read: Simulation = cleave::checkpoint::read(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(read.solver_kind(), SolverKind::Cholesky);
+    // the same block at E = 1e5 Pa, ν = 0.35 lands in about 25 iterations
+    // a step (more on a few)
+    let mut soft = body(block, 1e5, 0.35, SolverKind::Auto);
+    let iterations: Vec<usize> = (0..30).map(|_| soft.step().unwrap().solve.iterations).collect();
+    assert_eq!(soft.solver_kind(), SolverKind::Auto, "{iterations:?}");
+    assert!(iterations[10..].iter().all(|&i| i > 1), "{iterations:?}");
 }
