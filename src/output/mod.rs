@@ -199,8 +199,12 @@ impl MeanMax {
 /// Solver statistics of a run.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SolverSummary {
-    /// `"cholesky"` or `"cg"`.
+    /// The scene's solver: `"auto"`, `"cholesky"`, `"cg"`, ...
     pub kind: String,
+    /// The solver of the last step: `kind`, or `"cholesky"` where `"auto"`
+    /// handed the steps to Cholesky ([`crate::solve::SolverKind::Auto`]).
+    #[serde(default)]
+    pub kind_at_end: String,
     /// Iterations per solve.
     pub iterations: MeanMax,
     /// Relative residual per solve.

@@ -524,6 +524,7 @@ impl Run {
             kinetic_energy: sim.kinetic_energy(),
             solver: SolverSummary {
                 kind: format!("{:?}", s.solver.kind.kind()).to_lowercase(),
+                kind_at_end: format!("{:?}", sim.solver_kind()).to_lowercase(),
                 iterations: MeanMax::of(p.solves.iter().map(|s| s.0 as f64)),
                 residual: MeanMax::of(p.solves.iter().map(|s| s.1)),
             },
