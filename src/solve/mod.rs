@@ -221,9 +221,10 @@ pub enum SolverKind {
     /// bunny_5k (6.4k unknowns) for E = 1e5 to 1e9 Pa and soft contacts,
     /// 22 against 5-7 ms on a box of 14x10x8 hexahedra, 24 against 8.9 ms
     /// over the first 60 steps of `dg_bunny_from_cube`; over `bunny_cut`
-    /// Cholesky alone and CG alone tied (22.8 and 23.1 ms a step, its
-    /// stiff contacts taking CG 110 iterations a step) and Auto took
-    /// 17.7-18.3 ms, CG while the bunny falls and Cholesky after. CG took
+    /// Cholesky alone and CG alone tied (its stiff contacts took CG 110
+    /// iterations a step), and Auto, CG while the bunny falls and Cholesky
+    /// after, took 14.1-14.9 ms a step against Cholesky's 16.8-18.2
+    /// (alternated runs). CG took
     /// 1.5 times as long at ν = 0.49, and did not converge on a beam of
     /// 40x2x2 hexahedra at E = 1e10 Pa. On the 100k-tet bunny (60k unknowns)
     /// a CG step takes ~0.035 s and a refactorising Cholesky step ~0.55 s.
