@@ -203,7 +203,6 @@ pub struct SolverSummary {
     pub kind: String,
     /// The solver of the last step: `kind`, or `"cholesky"` where `"auto"`
     /// handed the steps to Cholesky ([`crate::solve::SolverKind::Auto`]).
-    #[serde(default)]
     pub kind_at_end: String,
     /// Iterations per solve.
     pub iterations: MeanMax,

@@ -7,7 +7,8 @@
 //! 3. contacts     A += (1 + h α) M, b = M v + h (f_gravity + f_elastic);
 //!                 penalty contacts linearised into A and b
 //! 4. constraints  prescribed velocities eliminated symmetrically
-//! 5. solve        A v⁺ = b, warm-started from 2 v - v⁻
+//! 5. solve        A v⁺ = b, warm-started from 2 v - v⁻ (SolverKind::Auto:
+//!                 by CG, by Cholesky once CG proves slow)
 //! 6. integrate    x⁺ = x + h v⁺
 //! ```
 //!
@@ -155,7 +156,6 @@ impl Simulation {
             let p = &self.params;
             self.system = StepSystem::new(self.solver_kind(), &self.pattern, p.tolerance, p.max_iterations);
         }
-        // (whether CG going past its budget hands the steps to Cholesky)
         let n = 3 * self.pattern.num_blocks;
         let may_fall_back =
             self.solver_kind() == SolverKind::Auto && SolverChoice::of(SolverKind::Auto, n) == SolverChoice::Cg;
@@ -188,23 +188,26 @@ impl Simulation {
         let mut solve_step = |system: &mut StepSystem| {
             timings.time(Phase::Solve, || solve(elements, pattern, masses, state, nodal, c_m, c_k, system))
         };
-        let (p, average) = (&self.params, &mut self.auto_cg_iterations);
-        let solve = match solve_step(system) {
-            // the same step again, by Cholesky, and every step after it
-            Err(SolveError::NotConverged { .. }) if may_fall_back => {
-                self.solver_fell_back = true;
-                system.renew(SolverKind::Cholesky, pattern, p.tolerance, p.max_iterations);
-                solve_step(system)?
-            }
-            Ok(stats) if may_fall_back => {
-                *average += (stats.iterations as f64 - *average) / 16.0;
-                if *average > auto_cg_budget(n) as f64 {
-                    // (the coming steps: the system keeps its buffers)
-                    self.solver_fell_back = true;
-                    system.renew(SolverKind::Cholesky, pattern, p.tolerance, p.max_iterations);
+        // (Auto hands the steps to Cholesky when this step's CG did not
+        // converge, and then solves it again, or when CG's running mean of
+        // iterations passes its budget)
+        let solved = solve_step(system);
+        let average = &mut self.auto_cg_iterations;
+        let fall_back = may_fall_back
+            && match &solved {
+                Ok(stats) => {
+                    *average += (stats.iterations as f64 - *average) / 16.0;
+                    *average > auto_cg_budget(n) as f64
                 }
-                stats
-            }
+                Err(error) => matches!(error, SolveError::NotConverged { .. }),
+            };
+        if fall_back {
+            self.solver_fell_back = true;
+            let p = &self.params;
+            system.renew(SolverKind::Cholesky, pattern, p.tolerance, p.max_iterations);
+        }
+        let solve = match solved {
+            Err(_) if fall_back => solve_step(system)?,
             solved => solved?,
         };
         // 6.

@@ -224,10 +224,10 @@ pub enum SolverKind {
     /// Cholesky alone and CG alone tied (its stiff contacts took CG 110
     /// iterations a step), and Auto, CG while the bunny falls and Cholesky
     /// after, took 14.1-14.9 ms a step against Cholesky's 16.8-18.2
-    /// (alternated runs). CG took
-    /// 1.5 times as long at ν = 0.49, and did not converge on a beam of
-    /// 40x2x2 hexahedra at E = 1e10 Pa. On the 100k-tet bunny (60k unknowns)
-    /// a CG step takes ~0.035 s and a refactorising Cholesky step ~0.55 s.
+    /// (alternated runs). CG took 1.5 times as long at ν = 0.49, and did
+    /// not converge on a beam of 40x2x2 hexahedra at E = 1e10 Pa. On the
+    /// 100k-tet bunny (60k unknowns) a CG step takes ~0.035 s and a
+    /// refactorising Cholesky step ~0.55 s.
     #[default]
     Auto,
     /// Direct Cholesky, refactorised whenever the matrix changes: the
@@ -256,11 +256,11 @@ pub enum SolverKind {
 
 /// The iterations per step, on average, that [`SolverKind::Auto`]'s CG
 /// may take on a system of `unknowns` unknowns before the steps go to
-/// Cholesky: `unknowns / 100`, at least 40. Below where a CG step costs
+/// Cholesky: `unknowns / 100`, at least 40. About where a CG step costs
 /// as much as a refactorising Cholesky one (measured: ~35 iterations at
-/// 1.4k unknowns, 70-95 at 6.4k, ~110 at 14k, ~1,100 at 60k), so that the
-/// conditioning CG is slow on costs at most about one Cholesky step more
-/// than it would. The mean starts from 0 and weighs the newest step a
+/// 1.4k unknowns, 70-95 at 6.4k, ~110 at 14k; ~1,100 at 60k, 0.55 s
+/// against 0.5 ms an iteration), so that the conditioning CG is slow on
+/// costs at most about one Cholesky step more than it would. The mean starts from 0 and weighs the newest step a
 /// sixteenth (about the last sixteen steps), so that a few steps that
 /// take more (the first ones, a contact coming on) do not end CG: a body
 /// of 10x6x5 hexahedra (1.4k unknowns) landing at h = 0.02 s took 25
