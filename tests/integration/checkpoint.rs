@@ -7,6 +7,8 @@ use std::process::Command;
 
 use cleave::scene::{LoadedScene, Run, RunOptions, CHECKPOINT_FILE};
 
+use crate::common;
+
 fn scene(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(name)
 }
@@ -173,10 +175,7 @@ fn damaged_checkpoints_are_refused_by_name() {
 fn a_resumed_simulation_keeps_room_for_cuts() {
     let mesh = cleave::meshing::box_tet([0.0; 3], [1.0; 3], [4, 4, 4]).unwrap();
     let sim = cleave::sim::Simulation::new(mesh, Default::default()).unwrap();
-    let path = std::env::temp_dir().join(format!("cleave_room_{}.bin", std::process::id()));
-    cleave::checkpoint::write(&path, &sim).unwrap();
-    let read: cleave::sim::Simulation = cleave::checkpoint::read(&path).unwrap();
-    std::fs::remove_file(&path).unwrap();
+    let read: cleave::sim::Simulation = common::checkpoint_round_trip(&sim);
     for (label, sim) in [("built", &sim), ("read", &read)] {
         let mesh = sim.mesh();
         for (array, len, capacity) in [

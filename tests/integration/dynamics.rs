@@ -400,10 +400,7 @@ fn auto_hands_the_steps_cg_is_slow_on_to_cholesky() {
         }
         assert_eq!(sim.solver_kind(), SolverKind::Cholesky);
     }
-    let path = std::env::temp_dir().join(format!("cleave_fallback_{}.bin", std::process::id()));
-    cleave::checkpoint::write(&path, &stiff).unwrap();
-    let read: Simulation = cleave::checkpoint::read(&path).unwrap();
-    std::fs::remove_file(&path).unwrap();
+    let read: Simulation = common::checkpoint_round_trip(&stiff);
     assert_eq!(read.solver_kind(), SolverKind::Cholesky);
     // the same block at E = 1e5 Pa, ν = 0.35 lands in about 25 iterations
     // a step (more on a few)

@@ -171,10 +171,7 @@ fn only_a_scalar_solver_makes_the_scalar_rows() {
         sim.step().unwrap();
         assert_eq!(sim.pattern().holds_scalar(), scalar, "{solver:?}: after a cut and a step");
         // a checkpoint writes the scalar rows without keeping them
-        let path = std::env::temp_dir().join(format!("cleave_scalar_rows_{solver:?}_{}.bin", std::process::id()));
-        cleave::checkpoint::write(&path, sim.pattern()).unwrap();
-        let read: SparsePattern = cleave::checkpoint::read(&path).unwrap();
-        std::fs::remove_file(&path).unwrap();
+        let read: SparsePattern = common::checkpoint_round_trip(sim.pattern());
         assert_eq!(sim.pattern().holds_scalar(), scalar, "{solver:?}: after a checkpoint");
         assert_eq!(read.symbolic().row_idx(), sim.pattern().symbolic().row_idx());
         let fresh = SparsePattern::build(sim.mesh().nodes.len(), sim.store());

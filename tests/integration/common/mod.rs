@@ -188,3 +188,12 @@ pub fn element_cone_rule(mesh: &cleave::mesh::PolyMesh, e: usize, n: usize) -> (
     cleave_kernels::quadrature::cone_rule(&verts, &tris, mesh.element_centroid(e), n, &mut pts, &mut wts);
     (pts, wts)
 }
+
+/// `value` written to a checkpoint file (in a temporary folder, removed
+/// after) and read back.
+pub fn checkpoint_round_trip<T: serde::Serialize + serde::de::DeserializeOwned>(value: &T) -> T {
+    let folder = tempfile::tempdir().unwrap();
+    let path = folder.path().join("checkpoint.bin");
+    cleave::checkpoint::write(&path, value).unwrap();
+    cleave::checkpoint::read(&path).unwrap()
+}
