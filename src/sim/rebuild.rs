@@ -5,9 +5,8 @@
 
 use crate::mesh::{Plane, PolyMesh, ValidationOptions};
 use crate::topology::{
-    conserve_momentum, cut_by_plane_keeping, cut_by_polygon_keeping, momenta, node_diameters, open_pinched_nodes,
-    pinched_nodes, polygon_plane, raise_node_diameters, CutReport, CutScope, NodeOrigins, PolygonCutReport, Reach,
-    Rollback, SplitOptions,
+    conserve_momentum, momenta, node_diameters, open_pinched_nodes, pinched_nodes, polygon_plane, raise_node_diameters,
+    CutReport, CutScope, CutShape, NodeOrigins, PolygonCutReport, Reach, Rollback, SplitOptions,
 };
 use crate::Error;
 
@@ -22,12 +21,7 @@ impl Simulation {
     /// columns of their nodes are rebuilt. On error the simulation is left
     /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
-        let opts = self.cut_options();
-        let cut = |mesh: &mut PolyMesh, keep: &[u32], scope: CutScope| -> Result<PolygonCutReport, Error> {
-            let cut = cut_by_plane_keeping(mesh, plane, &opts, keep, scope)?;
-            Ok(PolygonCutReport { cut, pocket: None })
-        };
-        self.cut(plane, None, cut).map(|report| report.cut)
+        self.cut(plane, CutShape::Plane(plane)).map(|report| report.cut)
     }
 
     /// Cuts the body with a convex planar polygon given in the rest frame
@@ -36,11 +30,7 @@ impl Simulation {
     /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
         let plane = polygon_plane(polygon)?;
-        let opts = self.cut_options();
-        let cut = |mesh: &mut PolyMesh, keep: &[u32], scope: CutScope| -> Result<PolygonCutReport, Error> {
-            Ok(cut_by_polygon_keeping(mesh, polygon, &opts, keep, scope)?)
-        };
-        self.cut(&plane, Some(polygon), cut)
+        self.cut(&plane, CutShape::Polygon(polygon))
     }
 
     /// The split options of a cut: the parameters' with their
@@ -80,20 +70,14 @@ impl Simulation {
         Some((0..mesh.elements.len() as u32).filter(|&e| marked[e as usize]).collect())
     }
 
-    /// Runs `cut` (a cut along `plane`, or along `polygon` in it, leaving
-    /// the elements it is given whole, looking at the elements in scope)
-    /// on the mesh in place and
-    /// brings everything else up to date.
+    /// Cuts the mesh in place along `shape` (in `plane`), leaving whole the
+    /// elements found unhealthy before and looking only at the elements in
+    /// scope, and brings everything else up to date.
     /// When the element store finds an element the cut made or changed
     /// unhealthy (see [`crate::store::HealthFloors`]), the cut is undone
     /// and run again with the element it came from kept whole, up to
     /// [`CUT_ATTEMPTS`] times; on any other error the mesh is rolled back.
-    fn cut(
-        &mut self,
-        plane: &Plane,
-        polygon: Option<&[[f64; 3]]>,
-        cut: impl Fn(&mut PolyMesh, &[u32], CutScope) -> Result<PolygonCutReport, Error>,
-    ) -> Result<PolygonCutReport, Error> {
+    fn cut(&mut self, plane: &Plane, shape: CutShape) -> Result<PolygonCutReport, Error> {
         // (the penalty is the body's as it was built: a cut keeps it)
         self.stabilise()?;
         let t = std::time::Instant::now();
@@ -101,14 +85,19 @@ impl Simulation {
         let before = rebuild(&self.timings);
         let mut keep_whole: Vec<u32> = Vec::new();
         // (every attempt starts from the same mesh: the scope holds for all)
+        let polygon = match shape {
+            CutShape::Plane(_) => None,
+            CutShape::Polygon(polygon) => Some(polygon),
+        };
         let listed = self.cut_scope(plane, polygon);
+        let opts = self.cut_options();
         let size = |mesh: &PolyMesh| (mesh.nodes.len(), mesh.elements.len(), mesh.faces.len());
         let size_before = size(&self.mesh);
         let result = loop {
             let scope = listed.as_deref().map_or(CutScope::whole(), |l| CutScope::listed(&self.mesh, l));
-            let rollback = Rollback::around_plane(&self.mesh, plane, scope);
-            let outcome = match cut(&mut self.mesh, &keep_whole, scope) {
-                Err(error) => Err((None, error)),
+            let (rollback, cut) = Rollback::cut(&mut self.mesh, shape, &opts, &keep_whole, scope);
+            let outcome = match cut {
+                Err(error) => Err((None, error.into())),
                 // a cut that misses the body, or meets it only along faces
                 // it leaves joined, changes nothing: the element data, the
                 // pattern, its analysis and the solver's carried state stand

@@ -9,7 +9,7 @@
 //! sides shared become two boundary faces and the body opens there.
 //! Positions are in the mesh's rest (material) frame.
 
-use super::split::{on_plane_band, split, SplitError, SplitOptions, SplitReport};
+use super::split::{classify, on_plane_band, split_classified, Classification, SplitError, SplitOptions, SplitReport};
 use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{Face, PolyMesh};
@@ -127,8 +127,21 @@ pub fn cut_by_plane_keeping(
     keep_whole: &[u32],
     scope: CutScope,
 ) -> Result<CutReport, SplitError> {
+    let classification = classify(mesh, plane, None, keep_whole, opts, scope)?;
+    cut_classified(mesh, plane, classification, scope)
+}
+
+/// [`cut_by_plane_keeping`] once [`classify`] has decided, on this `mesh`
+/// (unchanged since), which elements to split: the part that changes the
+/// mesh.
+pub(crate) fn cut_classified(
+    mesh: &mut PolyMesh,
+    plane: &Plane,
+    classification: Classification,
+    scope: CutScope,
+) -> Result<CutReport, SplitError> {
     let nodes_before = mesh.nodes.len();
-    let split = split(mesh, plane, None, keep_whole, opts, scope)?;
+    let split = split_classified(mesh, plane, classification)?;
     let region = cut_region(mesh, plane, &split, scope);
     let side = element_sides(mesh, plane, &region, &split);
     let (duplicated, mut touched) = separate(mesh, &region, &side, |_| true, |_| true);

@@ -15,7 +15,7 @@ mod transfer;
 pub use cut::{cut_by_plane, cut_by_plane_keeping, CutReport};
 pub use pinch::{open_pinched_nodes, pinched_nodes};
 pub use polygon::{cut_by_polygon, cut_by_polygon_keeping, polygon_plane, PolygonCutReport};
-pub use rollback::Rollback;
+pub use rollback::{CutShape, Rollback};
 pub use scope::{node_diameters, raise_node_diameters, CutScope, Reach};
 pub use sliver::{merge_slivers, SliverReport};
 pub(crate) use split::classify_split;

@@ -20,7 +20,9 @@ use rayon::prelude::*;
 use smallvec::SmallVec;
 
 use super::cut::{cut_region, element_sides, separate, CutReport};
-use super::split::{on_plane_band, plane_basis, split, NewNode, SplitError, SplitOptions, ON_PLANE};
+use super::split::{
+    classify, on_plane_band, plane_basis, split_classified, Classification, NewNode, SplitError, SplitOptions, ON_PLANE,
+};
 use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{face_geometry, Face, FaceLoop, FaceRef, PolyMesh};
@@ -165,6 +167,31 @@ pub fn cut_by_polygon_keeping(
     keep_whole: &[u32],
     scope: CutScope,
 ) -> Result<PolygonCutReport, SplitError> {
+    let plan = plan_polygon_cut(mesh, polygon, opts, keep_whole, scope)?;
+    cut_as_planned(mesh, plan, opts, keep_whole, scope)
+}
+
+/// What a polygon cut decides before it changes the mesh: the polygon's
+/// plane, its 2-D frame and outline, and which elements to split.
+pub(crate) struct PolygonPlan {
+    plane: Plane,
+    frame: Frame,
+    /// The polygon's counter-clockwise outline in `frame`.
+    outline: Vec<[f64; 2]>,
+    /// The polygon's largest distance from its centroid (m).
+    size: f64,
+    classification: Classification,
+}
+
+/// The read-only part of [`cut_by_polygon_keeping`]: checks the polygon and
+/// classifies the elements its plane crosses whose section overlaps it.
+pub(crate) fn plan_polygon_cut(
+    mesh: &PolyMesh,
+    polygon: &[[f64; 3]],
+    opts: &SplitOptions,
+    keep_whole: &[u32],
+    scope: CutScope,
+) -> Result<PolygonPlan, SplitError> {
     // the polygon's plane and its counter-clockwise 2-D outline
     let plane = polygon_plane(polygon)?;
     let (n_pts, centroid, normal) = (polygon.len(), plane.point, plane.normal);
@@ -213,8 +240,24 @@ pub fn cut_by_polygon_keeping(
         })
         .flatten()
         .collect();
+    let classification = classify(mesh, &plane, Some(&chosen), keep_whole, opts, scope)?;
+    Ok(PolygonPlan { plane, frame, outline, size, classification })
+}
+
+/// The part of [`cut_by_polygon_keeping`] that changes the mesh, as
+/// [`plan_polygon_cut`] planned it on this `mesh` (unchanged since).
+pub(crate) fn cut_as_planned(
+    mesh: &mut PolyMesh,
+    plan: PolygonPlan,
+    opts: &SplitOptions,
+    keep_whole: &[u32],
+    scope: CutScope,
+) -> Result<PolygonCutReport, SplitError> {
+    let PolygonPlan { plane, frame, outline, size, classification } = plan;
+    let n_pts = outline.len();
+    let dist = |x: [f64; 3]| plane.distance(x);
     let nodes_before = mesh.nodes.len();
-    let split = split(mesh, &plane, Some(&chosen), keep_whole, opts, scope)?;
+    let split = split_classified(mesh, &plane, classification)?;
     let protected = |e: &u32| keep_whole.binary_search(e).is_ok();
     let mut new_nodes = split.new_nodes.clone();
 

@@ -10,11 +10,23 @@
 //! elements and faces, so a cut that fails half-way can be undone in time
 //! proportional to the region it touched.
 
-use super::split::on_plane_band;
+use super::cut::cut_classified;
+use super::polygon::{cut_as_planned, plan_polygon_cut, polygon_plane, PolygonCutReport, PolygonPlan};
+use super::split::{classify, on_plane_band, Classification, SplitError, SplitOptions};
 use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{Element, Face, FaceRef, Lists, PolyMesh};
 use rayon::prelude::*;
+
+/// What a cut cuts along: a whole plane, or a convex planar polygon (rest
+/// frame, m).
+#[derive(Clone, Copy, Debug)]
+pub enum CutShape<'a> {
+    /// [`super::cut_by_plane_keeping`]'s cut.
+    Plane(&'a Plane),
+    /// [`super::cut_by_polygon_keeping`]'s cut.
+    Polygon(&'a [[f64; 3]]),
+}
 
 /// What a cut may change, saved before it runs (flat, so saving costs no
 /// allocation per element or face).
@@ -36,6 +48,53 @@ pub struct Rollback {
 }
 
 impl Rollback {
+    /// Cuts `mesh` along `shape` as [`super::cut_by_plane_keeping`] or
+    /// [`super::cut_by_polygon_keeping`] do (same arguments, same result),
+    /// and returns the rollback that undoes the cut, whether it succeeded
+    /// or failed half-way. The rollback ([`Rollback::around_plane`]) is
+    /// saved on one thread while the cut's read-only part, the
+    /// classification of the elements around the plane, runs on the
+    /// others: both only read the mesh, and both wait on memory more than
+    /// they compute.
+    pub fn cut(
+        mesh: &mut PolyMesh,
+        shape: CutShape,
+        opts: &SplitOptions,
+        keep_whole: &[u32],
+        scope: CutScope,
+    ) -> (Rollback, Result<PolygonCutReport, SplitError>) {
+        let plane = match shape {
+            CutShape::Plane(plane) => *plane,
+            CutShape::Polygon(polygon) => match polygon_plane(polygon) {
+                Ok(plane) => plane,
+                Err(error) => return (Self::save(mesh, &[], &[], Vec::new()), Err(error)),
+            },
+        };
+        /// The read-only part's outcome.
+        enum Plan {
+            Plane(Classification),
+            Polygon(PolygonPlan),
+        }
+        let read_only = &*mesh;
+        let (rollback, plan) = rayon::join(
+            || Self::around_plane(read_only, &plane, scope),
+            || match shape {
+                CutShape::Plane(_) => classify(read_only, &plane, None, keep_whole, opts, scope).map(Plan::Plane),
+                CutShape::Polygon(polygon) => {
+                    plan_polygon_cut(read_only, polygon, opts, keep_whole, scope).map(Plan::Polygon)
+                }
+            },
+        );
+        let cut = plan.and_then(|plan| match plan {
+            Plan::Plane(classification) => {
+                let cut = cut_classified(mesh, &plane, classification, scope)?;
+                Ok(PolygonCutReport { cut, pocket: None })
+            }
+            Plan::Polygon(plan) => cut_as_planned(mesh, plan, opts, keep_whole, scope),
+        });
+        (rollback, cut)
+    }
+
     /// Saves what a cut along `plane` may change: the elements sharing a
     /// node with an element that reaches the plane, and their faces; only
     /// the elements in `scope` are looked at (they hold all of those).

@@ -653,8 +653,18 @@ pub(crate) fn split(
     opts: &SplitOptions,
     scope: CutScope,
 ) -> Result<SplitReport, SplitError> {
-    let Classification { dist, side, straddling, crossed, kept_whole, on_plane } =
-        classify(mesh, plane, only, keep_whole, opts, scope)?;
+    let classification = classify(mesh, plane, only, keep_whole, opts, scope)?;
+    split_classified(mesh, plane, classification)
+}
+
+/// Splits the elements as [`classify`] decided on this `mesh` (unchanged
+/// since) for `plane`: the part of [`split`] that changes the mesh.
+pub(crate) fn split_classified(
+    mesh: &mut PolyMesh,
+    plane: &Plane,
+    classification: Classification,
+) -> Result<SplitReport, SplitError> {
+    let Classification { dist, side, straddling, crossed, kept_whole, on_plane } = classification;
     let mut report =
         SplitReport { kept_whole: kept_whole.iter().map(|&e| e as u32).collect(), on_plane, ..Default::default() };
     if crossed.is_empty() {

@@ -14,7 +14,7 @@ use cleave::solve::{BlockStructure, SolverKind};
 use cleave::store::{BasisOptions, ElementStore, HealthFloors};
 use cleave::topology::{
     cut_by_plane, cut_by_plane_keeping, cut_by_polygon, cut_by_polygon_keeping, node_diameters, polygon_plane,
-    CutReport, CutScope, Reach, Rollback, SplitOptions,
+    CutReport, CutScope, CutShape, PolygonCutReport, Reach, Rollback, SplitOptions,
 };
 use proptest::prelude::*;
 
@@ -198,7 +198,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(200))]
 
     /// Everything a cut changes in the mesh it had is saved beforehand, and
-    /// restoring puts the mesh back exactly.
+    /// restoring puts the mesh back exactly; the cut that saves its
+    /// rollback beside its read-only part is the plain cut.
     #[test]
     fn rollback_saves_all_a_cut_changes(
         seed in 0u64..10_000,
@@ -207,15 +208,18 @@ proptest! {
         half in (0.1f64..0.6, 0.1f64..0.6),
     ) {
         let before = common::cube_of_polyhedra_or_tets(seed, 6);
-        let mut mesh = before.clone();
+        let (mut mesh, mut plain) = (before.clone(), before.clone());
         let corners = common::rectangle_in_plane(&plane, half, 0.3);
-        let cut_plane = if polygon { polygon_plane(&corners).unwrap() } else { plane };
-        let rollback = Rollback::around_plane(&mesh, &cut_plane, CutScope::whole());
-        if polygon {
-            cut_by_polygon(&mut mesh, &corners, &SplitOptions::default()).unwrap();
+        let opts = SplitOptions::default();
+        let shape = if polygon { CutShape::Polygon(&corners) } else { CutShape::Plane(&plane) };
+        let (rollback, report) = Rollback::cut(&mut mesh, shape, &opts, &[], CutScope::whole());
+        let plain_report = if polygon {
+            cut_by_polygon(&mut plain, &corners, &opts).unwrap()
         } else {
-            cut_by_plane(&mut mesh, &plane, &SplitOptions::default()).unwrap();
-        }
+            PolygonCutReport { cut: cut_by_plane(&mut plain, &plane, &opts).unwrap(), pocket: None }
+        };
+        prop_assert_eq!(report.unwrap(), plain_report);
+        prop_assert!(mesh == plain);
         for e in 0..before.elements.len() {
             prop_assert!(mesh.elements[e] == before.elements[e] || rollback.saved_element(e), "element {} not saved", e);
         }
