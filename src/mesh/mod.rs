@@ -291,6 +291,23 @@ impl PolyMesh {
         collect_nodes(&self.faces, &element.faces, &mut element.nodes);
     }
 
+    /// [`PolyMesh::refresh_element_nodes`] for each of `elements` (each
+    /// once), in parallel.
+    pub(crate) fn refresh_elements_nodes(&mut self, elements: &[u32]) {
+        let (faces, all) = (&self.faces, &self.elements);
+        let lists: Vec<ElementNodes> = elements
+            .par_iter()
+            .map(|&e| {
+                let mut nodes = ElementNodes::new();
+                collect_nodes(faces, &all[e as usize].faces, &mut nodes);
+                nodes
+            })
+            .collect();
+        for (&e, nodes) in elements.iter().zip(lists) {
+            self.elements[e as usize].nodes = nodes;
+        }
+    }
+
     /// (Re)computes the triangulation of every face.
     pub(crate) fn triangulate_all(&mut self) {
         let nodes = &self.nodes;

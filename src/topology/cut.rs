@@ -200,7 +200,8 @@ pub(crate) fn separate(
         return (duplicated, touched);
     }
     let remap = |v: &u32| if copy[*v as usize] != u32::MAX { copy[*v as usize] } else { *v };
-    let mut done = vec![u32::MAX; mesh.faces.len()];
+    // (the face each face became, for the few faces renamed or copied)
+    let mut done: rustc_hash::FxHashMap<u32, u32> = Default::default();
     for e in region.iter().map(|&e| e as usize) {
         // (node lists are refreshed below, so they still hold the originals)
         if side[e] > 0 || !mesh.elements[e].nodes.iter().any(|&v| copy[v as usize] != u32::MAX) {
@@ -214,28 +215,28 @@ pub(crate) fn separate(
             if face_sides[f] == 3 && separable(f as u32) {
                 // shared with the positive side: the negative element gets
                 // its own copy of the face on the duplicated nodes
-                if done[f] == u32::MAX {
+                let moved = *done.entry(f as u32).or_insert_with(|| {
                     let face = &mesh.faces[f];
-                    done[f] = mesh.faces.len() as u32;
                     let moved = Face {
                         vertices: face.vertices.iter().map(remap).collect(),
                         triangles: face.triangles.iter().map(|t| t.map(|v| remap(&v))).collect(),
                     };
                     mesh.faces.push(moved);
-                }
-                mesh.elements[e].faces[k].face = done[f];
-            } else if face_sides[f] == 2 && done[f] == u32::MAX {
+                    mesh.faces.len() as u32 - 1
+                });
+                mesh.elements[e].faces[k].face = moved;
+            } else if face_sides[f] == 2 && !done.contains_key(&(f as u32)) {
                 // used by negative elements only: rename its nodes in place
-                done[f] = f as u32;
+                done.insert(f as u32, f as u32);
                 let face = &mut mesh.faces[f];
                 face.vertices.iter_mut().for_each(|v| *v = remap(v));
                 face.triangles.iter_mut().for_each(|t| *t = t.map(|v| remap(&v)));
             }
         }
         if changed {
-            mesh.refresh_element_nodes(e);
             touched.push(e as u32);
         }
     }
+    mesh.refresh_elements_nodes(&touched);
     (duplicated, touched)
 }

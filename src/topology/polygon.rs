@@ -269,21 +269,44 @@ pub(crate) fn cut_as_planned(
     // cap it did not get
     let band = on_plane_band(mesh);
     let region = cut_region(mesh, &plane, &split, scope);
-    let mut region_faces: Vec<u32> =
-        region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
-    region_faces.sort_unstable();
-    region_faces.dedup();
-    let mut users: HashMap<u32, FaceUsers> = HashMap::default();
-    users.reserve(region_faces.len());
-    for &e in &region {
-        for r in &mesh.elements[e as usize].faces {
-            users.entry(r.face).or_default().push(e);
-        }
-    }
+    // (read-only passes over the region, waiting on memory: the faces and
+    // their users beside the elements' sides and snapping radii)
+    let ((region_faces, mut users), (side, mut line_snap)) = rayon::join(
+        || {
+            let mut region_faces: Vec<u32> =
+                region.iter().flat_map(|&e| mesh.elements[e as usize].faces.iter().map(|r| r.face)).collect();
+            region_faces.sort_unstable();
+            region_faces.dedup();
+            let mut users: HashMap<u32, FaceUsers> = HashMap::default();
+            users.reserve(region_faces.len());
+            for &e in &region {
+                for r in &mesh.elements[e as usize].faces {
+                    users.entry(r.face).or_default().push(e);
+                }
+            }
+            (region_faces, users)
+        },
+        || {
+            // a vertex closer to a polygon edge's line than `snap` times the
+            // largest element around it lies on the line: a face is then
+            // split along a chord through it instead of next to it (the
+            // parts stay planar and convex, only the cut's outline strays
+            // from the line), so no node is made closer than that to a node
+            // of an element on its edge
+            let mut line_snap: HashMap<u32, f64> = HashMap::default();
+            for &e in &region {
+                let r = opts.snap * mesh.element_diameter(e as usize);
+                for &v in &mesh.elements[e as usize].nodes {
+                    let entry = line_snap.entry(v).or_insert(r);
+                    *entry = entry.max(r);
+                }
+            }
+            (element_sides(mesh, &plane, &region, &split), line_snap)
+        },
+    );
     let mut in_plane: Vec<u32> = split.caps.clone();
     let mut listed = vec![false; mesh.faces.len()];
     in_plane.iter().for_each(|&f| listed[f as usize] = true);
-    let side = element_sides(mesh, &plane, &region, &split);
     let mut detour: Vec<u32> = Vec::new();
     for &e in &split.kept_whole {
         for r in &mesh.elements[e as usize].faces {
@@ -307,43 +330,35 @@ pub(crate) fn cut_as_planned(
         let loop2: Vec<[f64; 2]> = lp.iter().map(|&v| frame.project(mesh.nodes[v as usize])).collect();
         convex_overlap(&loop2, &outline)
     };
-    for &f in &region_faces {
-        let face = &mesh.faces[f as usize];
-        if !listed[f as usize]
-            && users[&f].len == 2
-            && face.vertices.iter().all(|&v| on_plane(mesh, v))
-            && meets_polygon(mesh, &face.vertices)
-        {
-            listed[f as usize] = true;
-            in_plane.push(f);
-        }
-    }
-    // a vertex closer to a polygon edge's line than `snap` times the
-    // largest element around it lies on the line: a face is then split
-    // along a chord through it instead of next to it (the parts stay
-    // planar and convex, only the cut's outline strays from the line), so
-    // no node is made closer than that to a node of an element on its edge
-    let mut line_snap: HashMap<u32, f64> = HashMap::default();
-    for &e in &region {
-        let r = opts.snap * mesh.element_diameter(e as usize);
-        for &v in &mesh.elements[e as usize].nodes {
-            let entry = line_snap.entry(v).or_insert(r);
-            *entry = entry.max(r);
-        }
-    }
+    // (each face's test reads only the mesh: in parallel, in order)
+    let met: Vec<u32> = region_faces
+        .par_iter()
+        .copied()
+        .filter(|&f| {
+            let face = &mesh.faces[f as usize];
+            !listed[f as usize]
+                && users[&f].len == 2
+                && face.vertices.iter().all(|&v| on_plane(mesh, v))
+                && meets_polygon(mesh, &face.vertices)
+        })
+        .collect();
+    met.iter().for_each(|&f| listed[f as usize] = true);
+    in_plane.extend(met);
     // faces touching each node of the plane (stale entries are re-checked;
     // inline lists: a blade cut across bunny_100k lists 3,000 nodes, whose
-    // heap lists took a third of this map's 0.95 ms)
-    let mut node_faces: HashMap<u32, SmallVec<[u32; 16]>> = HashMap::default();
+    // heap lists took a third of this map's 0.95 ms), found in parallel
+    // and listed in order
     let plane_vertices: rustc_hash::FxHashSet<u32> =
         in_plane.iter().flat_map(|&f| mesh.faces[f as usize].vertices.iter().copied()).collect();
-    for &f in &region_faces {
-        for &v in &mesh.faces[f as usize].vertices {
-            if plane_vertices.contains(&v) {
-                node_faces.entry(v).or_default().push(f);
-            }
-        }
-    }
+    let touching: Vec<(u32, u32)> = region_faces
+        .par_iter()
+        .flat_map_iter(|&f| {
+            let vertices = &mesh.faces[f as usize].vertices;
+            vertices.iter().filter(|&v| plane_vertices.contains(v)).map(move |&v| (v, f))
+        })
+        .collect();
+    let mut node_faces: HashMap<u32, SmallVec<[u32; 16]>> = HashMap::default();
+    touching.into_iter().for_each(|(v, f)| node_faces.entry(v).or_default().push(f));
     let mut edge_node: HashMap<(u32, u32), u32> = HashMap::default();
     let mut touched_faces: Vec<u32> = Vec::new();
     // (the face's loop and its vertices' sides, reused from face to face)
@@ -516,17 +531,19 @@ pub(crate) fn cut_as_planned(
             pocket = Some((c, lp));
         }
     }
-    // every element on a touched face gets its node list refreshed
-    let mut touched: Vec<u32> =
-        split.split_elements.iter().flat_map(|&(a, b)| [a, b]).chain(split.repaired_elements.iter().copied()).collect();
+    // every element on a touched face gets its node list refreshed (the
+    // split's parts and the elements it repaired have theirs already)
+    let mut refreshed: Vec<u32> = Vec::new();
     for f in &touched_faces {
-        touched.extend(users.get(f).copied().unwrap_or_default().as_slice());
+        refreshed.extend(users.get(f).copied().unwrap_or_default().as_slice());
     }
+    refreshed.sort_unstable();
+    refreshed.dedup();
+    mesh.refresh_elements_nodes(&refreshed);
+    let parts = split.split_elements.iter().flat_map(|&(a, b)| [a, b]);
+    let mut touched: Vec<u32> = parts.chain(split.repaired_elements.iter().copied()).chain(refreshed).collect();
     touched.sort_unstable();
     touched.dedup();
-    for &e in &touched {
-        mesh.refresh_element_nodes(e as usize);
-    }
     inside_faces.sort_unstable();
     // a node opens when it lies strictly inside (and, by `separate`, on no
     // face of the plane left joined outside the polygon)

@@ -686,22 +686,36 @@ pub(crate) fn split_classified(
         })
     };
     let side_of = |x: u32| side.get(x as usize).copied().unwrap_or(0);
-    // 2. split the crossed faces: face -> (positive part, negative part)
+    // 2. split the crossed faces: face -> (positive part, negative part);
+    // the faces are found and their crossings made in order, the parts'
+    // loops and triangles built in parallel, then written in order
     let mut face_parts: HashMap<u32, (u32, u32)> = HashMap::default();
+    let mut split_faces: Vec<u32> = Vec::new();
     for &e in &crossed {
         for k in 0..mesh.elements[e].faces.len() {
-            let r = mesh.elements[e].faces[k];
-            if face_parts.contains_key(&r.face) {
+            let f = mesh.elements[e].faces[k].face;
+            let v = &mesh.faces[f as usize].vertices;
+            if face_parts.contains_key(&f)
+                || !(v.iter().any(|&x| side[x as usize] > 0) && v.iter().any(|&x| side[x as usize] < 0))
+            {
                 continue;
             }
-            let v = &mesh.faces[r.face as usize].vertices;
-            let has_pos = v.iter().any(|&x| side[x as usize] > 0);
-            let has_neg = v.iter().any(|&x| side[x as usize] < 0);
-            if !(has_pos && has_neg) {
-                continue;
+            face_parts.insert(f, (f, u32::MAX));
+            split_faces.push(f);
+            for i in 0..mesh.faces[f as usize].vertices.len() {
+                let v = &mesh.faces[f as usize].vertices;
+                let (a, b) = (v[i], v[(i + 1) % v.len()]);
+                if side[a as usize] * side[b as usize] < 0 {
+                    new_node(mesh, &mut report, a, b);
+                }
             }
-            // (the face's loop is replaced by its positive part below)
-            let v = std::mem::take(&mut mesh.faces[r.face as usize].vertices);
+        }
+    }
+    let (faces, nodes) = (&mesh.faces, &mesh.nodes);
+    let halves: Vec<(Face, Face)> = split_faces
+        .par_iter()
+        .map(|&f| {
+            let v = &faces[f as usize].vertices;
             // (a convex face's parts gain at most the two crossings)
             let (mut pos, mut neg) = (FaceLoop::with_capacity(v.len() + 2), FaceLoop::with_capacity(v.len() + 2));
             for i in 0..v.len() {
@@ -714,19 +728,20 @@ pub(crate) fn split_classified(
                     neg.push(a);
                 }
                 if sa * side[b as usize] < 0 {
-                    let c = new_node(mesh, &mut report, a, b);
+                    let c = edge_node[&(a.min(b), a.max(b))];
                     pos.push(c);
                     neg.push(c);
                 }
             }
-            let f_pos = r.face;
-            mesh.faces[f_pos as usize] = Face { vertices: pos, triangles: Default::default() };
-            let f_neg = mesh.faces.len() as u32;
-            mesh.faces.push(Face { vertices: neg, triangles: Default::default() });
-            mesh.triangulate_face(f_pos as usize);
-            mesh.triangulate_face(f_neg as usize);
-            face_parts.insert(r.face, (f_pos, f_neg));
-        }
+            let part =
+                |vertices: FaceLoop| Face { triangles: crate::mesh::triangulate_loop(nodes, &vertices), vertices };
+            (part(pos), part(neg))
+        })
+        .collect();
+    for (&f, (pos, neg)) in split_faces.iter().zip(halves) {
+        mesh.faces[f as usize] = pos;
+        face_parts.insert(f, (f, mesh.faces.len() as u32));
+        mesh.faces.push(neg);
     }
     // 2b. neighbours that are not split: both halves of a split face they
     // share, and the new nodes on their edges in their other faces' loops
@@ -783,9 +798,9 @@ pub(crate) fn split_classified(
             }
         }
         mesh.elements[e].faces = new_refs;
-        mesh.refresh_element_nodes(e);
         report.repaired_elements.push(e as u32);
     }
+    mesh.refresh_elements_nodes(&report.repaired_elements);
     // 3. split the elements: each one's parts (their faces, caps and
     // nodes) found in parallel, since each reads only the faces above and
     // the nodes, then written in order (the first failure in order is the
