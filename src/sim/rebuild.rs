@@ -9,6 +9,7 @@ use crate::topology::{
     CutReport, CutScope, CutShape, NodeOrigins, PolygonCutReport, Reach, Rollback, SplitOptions,
 };
 use crate::Error;
+use rayon::slice::ParallelSliceMut;
 
 use super::{Model, Phase, PhaseTimings, Simulation, CUT_ATTEMPTS};
 
@@ -230,7 +231,7 @@ impl Simulation {
         let store = &nodal.store;
         let mut changed_nodes = cut.old_nodes.clone();
         changed_nodes.extend(store.nodes_of(touched));
-        changed_nodes.sort_unstable();
+        changed_nodes.par_sort_unstable();
         changed_nodes.dedup();
         let old_changed: Vec<u32> = changed_nodes.iter().copied().filter(|&v| v < cut.nodes_before).collect();
         let state = &mut self.state;

@@ -13,6 +13,7 @@ use super::split::{classify, on_plane_band, split_classified, Classification, Sp
 use super::CutScope;
 use crate::mesh::Plane;
 use crate::mesh::{Face, PolyMesh};
+use rayon::slice::ParallelSliceMut;
 
 /// What a plane cut changed: everything a simulation needs to bring its
 /// element data, sparse pattern and node state up to date.
@@ -58,7 +59,7 @@ impl CutReport {
             .flat_map(|&e| mesh.elements[e as usize].nodes.iter())
             .filter_map(|v| if *v < nodes_before { Some(*v) } else { original.get(v).copied() })
             .collect();
-        old_nodes.sort_unstable();
+        old_nodes.par_sort_unstable();
         old_nodes.dedup();
         CutReport { plane, nodes_before, split, duplicated, touched, old_nodes }
     }
