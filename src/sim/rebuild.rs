@@ -9,7 +9,7 @@ use crate::topology::{
     CutReport, CutScope, CutShape, NodeOrigins, PolygonCutReport, Reach, Rollback, SplitOptions,
 };
 use crate::Error;
-use rayon::slice::ParallelSliceMut;
+use rayon::prelude::*;
 
 use super::{Model, Phase, PhaseTimings, Simulation, CUT_ATTEMPTS};
 
@@ -224,7 +224,7 @@ impl Simulation {
             }
         };
         if let Some(diameters) = &mut self.node_diameters {
-            raise_node_diameters(mesh, touched.iter().map(|&e| e as usize), diameters);
+            raise_node_diameters(mesh, touched.par_iter().map(|&e| e as usize), diameters);
         }
         // the nodes whose mass changes: those of the touched elements,
         // before and after

@@ -77,7 +77,7 @@ const DIAMETER_TASK: usize = 8192;
 pub fn node_diameters(mesh: &PolyMesh) -> Vec<f64> {
     let n = mesh.nodes.len();
     let raised = |mut out: Vec<f64>, e: usize| {
-        raise(mesh, e, &mut out);
+        raise(mesh, e, mesh.element_diameter(e), &mut out);
         out
     };
     let larger = |mut a: Vec<f64>, b: Vec<f64>| {
@@ -92,15 +92,21 @@ pub fn node_diameters(mesh: &PolyMesh) -> Vec<f64> {
 
 /// Raises `diameters` (see [`node_diameters`]) to the diameters of the
 /// `elements` of `mesh` (after they changed), growing it to the mesh's
-/// node count: an upper bound stays one.
-pub fn raise_node_diameters(mesh: &PolyMesh, elements: impl IntoIterator<Item = usize>, diameters: &mut Vec<f64>) {
+/// node count: an upper bound stays one. (The elements' diameters are
+/// found in parallel, then their nodes raised: a maximum, the same in any
+/// order.)
+pub fn raise_node_diameters(
+    mesh: &PolyMesh,
+    elements: impl IntoParallelIterator<Item = usize>,
+    diameters: &mut Vec<f64>,
+) {
     diameters.resize(mesh.nodes.len(), 0.0);
-    elements.into_iter().for_each(|e| raise(mesh, e, diameters));
+    let sized: Vec<(usize, f64)> = elements.into_par_iter().map(|e| (e, mesh.element_diameter(e))).collect();
+    sized.into_iter().for_each(|(e, d)| raise(mesh, e, d, diameters));
 }
 
-/// Raises the diameters of element `e`'s nodes to its own.
-fn raise(mesh: &PolyMesh, e: usize, diameters: &mut [f64]) {
-    let d = mesh.element_diameter(e);
+/// Raises the diameters of element `e`'s nodes to its diameter `d`.
+fn raise(mesh: &PolyMesh, e: usize, d: f64, diameters: &mut [f64]) {
     for &v in &mesh.elements[e].nodes {
         diameters[v as usize] = diameters[v as usize].max(d);
     }
