@@ -67,6 +67,7 @@ impl Rollback {
             CutShape::Plane(plane) => *plane,
             CutShape::Polygon(polygon) => match polygon_plane(polygon) {
                 Ok(plane) => plane,
+                // (the mesh is untouched: a rollback that saves nothing)
                 Err(error) => return (Self::save(mesh, &[], &[], Vec::new()), Err(error)),
             },
         };

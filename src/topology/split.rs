@@ -700,6 +700,7 @@ pub(crate) fn split_classified(
             {
                 continue;
             }
+            // (listed once; its negative part's id is known when written)
             face_parts.insert(f, (f, u32::MAX));
             split_faces.push(f);
             for i in 0..mesh.faces[f as usize].vertices.len() {
