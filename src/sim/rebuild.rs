@@ -22,7 +22,7 @@ impl Simulation {
     /// columns of their nodes are rebuilt. On error the simulation is left
     /// unchanged.
     pub fn cut_plane(&mut self, plane: &Plane) -> Result<CutReport, Error> {
-        self.cut(plane, CutShape::Plane(plane)).map(|report| report.cut)
+        self.cut(CutShape::Plane(plane)).map(|report| report.cut)
     }
 
     /// Cuts the body with a convex planar polygon given in the rest frame
@@ -30,8 +30,7 @@ impl Simulation {
     /// pocket where no node lies inside it. A swept blade is a sequence of
     /// such cuts. State and rebuild as in [`Simulation::cut_plane`].
     pub fn cut_polygon(&mut self, polygon: &[[f64; 3]]) -> Result<PolygonCutReport, Error> {
-        let plane = polygon_plane(polygon)?;
-        self.cut(&plane, CutShape::Polygon(polygon))
+        self.cut(CutShape::Polygon(polygon))
     }
 
     /// The split options of a cut: the parameters' with their
@@ -71,14 +70,19 @@ impl Simulation {
         Some((0..mesh.elements.len() as u32).filter(|&e| marked[e as usize]).collect())
     }
 
-    /// Cuts the mesh in place along `shape` (in `plane`), leaving whole the
+    /// Cuts the mesh in place along `shape`, leaving whole the
     /// elements found unhealthy before and looking only at the elements in
     /// scope, and brings everything else up to date.
     /// When the element store finds an element the cut made or changed
     /// unhealthy (see [`crate::store::HealthFloors`]), the cut is undone
     /// and run again with the element it came from kept whole, up to
     /// [`CUT_ATTEMPTS`] times; on any other error the mesh is rolled back.
-    fn cut(&mut self, plane: &Plane, shape: CutShape) -> Result<PolygonCutReport, Error> {
+    fn cut(&mut self, shape: CutShape) -> Result<PolygonCutReport, Error> {
+        // (a polygon without a plane fails before anything changes)
+        let (plane, polygon) = match shape {
+            CutShape::Plane(plane) => (*plane, None),
+            CutShape::Polygon(polygon) => (polygon_plane(polygon)?, Some(polygon)),
+        };
         // (the penalty is the body's as it was built: a cut keeps it)
         self.stabilise()?;
         let t = std::time::Instant::now();
@@ -86,11 +90,7 @@ impl Simulation {
         let before = rebuild(&self.timings);
         let mut keep_whole: Vec<u32> = Vec::new();
         // (every attempt starts from the same mesh: the scope holds for all)
-        let polygon = match shape {
-            CutShape::Plane(_) => None,
-            CutShape::Polygon(polygon) => Some(polygon),
-        };
-        let listed = self.cut_scope(plane, polygon);
+        let listed = self.cut_scope(&plane, polygon);
         let opts = self.cut_options();
         let size = |mesh: &PolyMesh| (mesh.nodes.len(), mesh.elements.len(), mesh.faces.len());
         let size_before = size(&self.mesh);
