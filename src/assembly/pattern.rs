@@ -234,55 +234,67 @@ struct NewColumn {
     incidences: Vec<Incidence>,
     /// Its block rows: the union of their nodes and itself, ascending.
     rows: Vec<u32>,
+    /// For each incidence in turn and each of its element's blocks: the
+    /// block's scalar offset in the column (three times its place among
+    /// `rows`).
+    slots: Vec<u32>,
+    /// The diagonal block's scalar offset in the column.
+    diagonal: u32,
 }
+
+/// Columns made per parallel task: each task clears a place table as long
+/// as the pattern once.
+const COLUMN_TASK: usize = 128;
+
+/// A place table for [`NewColumn::of`]: one entry per block, all
+/// [`NOWHERE`] between columns.
+fn place_table(num_blocks: usize) -> Vec<u32> {
+    vec![NOWHERE; num_blocks]
+}
+
+/// A block not among the rows of the column being made.
+const NOWHERE: u32 = u32::MAX;
 
 impl NewColumn {
     /// The column of node `j` touched by `incidences`, whose entries couple
-    /// the blocks `blocks_of(id)`.
-    fn of<'a>(j: usize, incidences: Vec<Incidence>, blocks_of: &impl Fn(u32) -> &'a [u32]) -> Self {
-        // (sized once: a cut recomputes thousands of columns)
-        let mut rows: Vec<u32> = Vec::with_capacity(incidences.iter().map(|inc| inc.size as usize).sum::<usize>() + 1);
-        for inc in &incidences {
-            rows.extend_from_slice(blocks_of(inc.id));
+    /// the blocks `blocks_of(id)`. `places` ([`place_table`]) marks the
+    /// blocks met, then holds their places while the slots are read, and
+    /// is left as it came: the rows are found without sorting the blocks
+    /// of every element (a node of a tetrahedral mesh meets each of its
+    /// neighbours about five times), and each slot is one look-up.
+    fn of<'a>(j: usize, incidences: Vec<Incidence>, blocks_of: &impl Fn(u32) -> &'a [u32], places: &mut [u32]) -> Self {
+        let blocks = || incidences.iter().flat_map(|inc| blocks_of(inc.id).iter().copied());
+        // (sized once: a cut makes thousands of columns)
+        let size = incidences.iter().map(|inc| inc.size as usize).sum::<usize>();
+        let (mut rows, mut slots) = (Vec::with_capacity(size + 1), Vec::with_capacity(size));
+        rows.push(j as u32); // (a lone node keeps its diagonal)
+        places[j] = 0;
+        for a in blocks() {
+            if places[a as usize] == NOWHERE {
+                places[a as usize] = 0;
+                rows.push(a);
+            }
         }
-        rows.push(j as u32); // lone nodes keep their diagonal
         rows.sort_unstable();
-        rows.dedup();
-        NewColumn { incidences, rows }
-    }
-
-    /// Number of slots its incidences take.
-    fn slots(&self) -> usize {
-        self.incidences.iter().map(|inc| inc.size as usize).sum()
+        let offset = |p: usize| u32::try_from(3 * p).expect("fewer than 2^32 entries per column");
+        rows.iter().enumerate().for_each(|(p, &r)| places[r as usize] = offset(p));
+        slots.extend(blocks().map(|a| places[a as usize]));
+        let diagonal = places[j];
+        rows.iter().for_each(|&r| places[r as usize] = NOWHERE);
+        NewColumn { incidences, rows, slots, diagonal }
     }
 
     /// Writes the column into its stretches of the arrays: the block rows,
     /// the incidences (their slots counted from the node's first) and the
-    /// slots; returns the diagonal block's offset.
-    fn write<'a>(
-        &self,
-        j: usize,
-        blocks_of: &impl Fn(u32) -> &'a [u32],
-        block_out: &mut [u32],
-        inc_out: &mut [Incidence],
-        slot_out: &mut [u32],
-    ) -> u32 {
-        let r = &self.rows;
-        block_out[..r.len()].copy_from_slice(r);
-        let position = |i: u32| -> u32 {
-            let p = r.binary_search(&i).expect("pattern holds every element pair");
-            u32::try_from(3 * p).expect("fewer than 2^32 entries per column")
-        };
+    /// slots.
+    fn write(&self, block_out: &mut [u32], inc_out: &mut [Incidence], slot_out: &mut [u32]) {
+        block_out.copy_from_slice(&self.rows);
+        slot_out.copy_from_slice(&self.slots);
         let mut written = 0;
         for (out, inc) in inc_out.iter_mut().zip(&self.incidences) {
-            *out = Incidence { slots: written as u32, ..*inc };
-            let nodes = blocks_of(inc.id);
-            for (s, &a) in slot_out[written..written + nodes.len()].iter_mut().zip(nodes) {
-                *s = position(a);
-            }
-            written += nodes.len();
+            *out = Incidence { slots: written, ..*inc };
+            written += inc.size;
         }
-        position(j as u32)
     }
 }
 
@@ -364,13 +376,18 @@ fn narrow(offsets: impl Iterator<Item = usize>) -> Vec<u32> {
 
 /// The block structure of block columns that start at the block rows
 /// `starts` (the last entry their end) in `rows`, their values laid out one
-/// after another.
-fn block_structure(starts: &[usize], rows: Vec<u32>) -> BlockStructure {
+/// after another: `checked` once, when the pattern is first laid out, and
+/// in order by construction after an update (see
+/// [`BlockStructure::from_ordered_columns`]).
+fn block_structure(starts: &[usize], rows: Vec<u32>, checked: bool) -> BlockStructure {
     let ptr = starts.iter().map(|&p| u32::try_from(p).expect("fewer than 2^32 block rows")).collect();
-    let values: Vec<usize> = starts.iter().map(|&p| 9 * p).collect();
-    let nnz = values[values.len() - 1];
-    BlockStructure::from_columns(ptr, rows, values[..values.len() - 1].to_vec(), nnz)
-        .expect("the layout writes ordered block columns")
+    let values: Vec<usize> = starts[..starts.len() - 1].iter().map(|&p| 9 * p).collect();
+    let nnz = 9 * starts[starts.len() - 1];
+    if checked {
+        BlockStructure::from_columns(ptr, rows, values, nnz).expect("the layout writes ordered block columns")
+    } else {
+        BlockStructure::from_ordered_columns(ptr, rows, values, nnz)
+    }
 }
 
 impl SparsePattern {
@@ -393,8 +410,9 @@ impl SparsePattern {
             }
         }
         let blocks_of = located_blocks(store);
-        let columns = columns.into_par_iter().enumerate().map(|(j, inc)| NewColumn::of(j, inc, &blocks_of));
-        Self::lay_out(&blocks_of, columns.collect())
+        let columns = (columns.into_par_iter().enumerate().with_min_len(COLUMN_TASK))
+            .map_init(|| place_table(num_blocks), |places, (j, inc)| NewColumn::of(j, inc, &blocks_of, places));
+        Self::lay_out(columns.collect())
     }
 
     /// The pattern of no blocks.
@@ -444,17 +462,27 @@ impl SparsePattern {
         let mut dirty = vec![false; num_blocks.max(kept)];
         old_nodes.iter().filter(|&&v| (v as usize) < num_blocks).for_each(|&v| dirty[v as usize] = true);
         dirty[kept.min(num_blocks)..].fill(true);
-        let mut added: Vec<(u32, Incidence)> = Vec::new();
+        // the changed entries' incidences by block (a counting sort: each
+        // block's in the order of `changed`, by id)
+        let mut added_at = vec![0u32; num_blocks.max(kept) + 1];
+        for &e in changed {
+            for &v in blocks_of(e) {
+                dirty[v as usize] = true;
+                added_at[v as usize + 1] += 1;
+            }
+        }
+        (1..added_at.len()).for_each(|j| added_at[j] += added_at[j - 1]);
+        let mut added = vec![UNSET; added_at[added_at.len() - 1] as usize];
+        let mut fill = added_at.clone();
         for &e in changed {
             let blocks = blocks_of(e);
             for (a, &v) in blocks.iter().enumerate() {
-                dirty[v as usize] = true;
                 let size = blocks.len() as u32;
                 let inc = Incidence { batch: UNLOCATED, element: UNLOCATED, id: e, local: a as u32, size, slots: 0 };
-                added.push((v, inc));
+                added[fill[v as usize] as usize] = inc;
+                fill[v as usize] += 1;
             }
         }
-        added.sort_by_key(|&(v, inc)| (v, inc.id));
         let last = changed.iter().max().map_or(0, |&e| e as usize + 1);
         let mut is_changed = vec![false; last];
         changed.iter().for_each(|&e| is_changed[e as usize] = true);
@@ -462,25 +490,27 @@ impl SparsePattern {
         let dirty_list: Vec<usize> = (0..num_blocks).filter(|&j| dirty[j]).collect();
         // where the changed entries sat: the couplings move others into
         // these places (a swap-remove), whose incidences `locate` refreshes
+        // (each entry read once, where it holds its first block: all its
+        // old blocks are among `old_nodes`)
         let mut vacated: Vec<(u32, u32)> = (0..kept)
             .filter(|&j| dirty[j])
             .flat_map(|j| self.column_incidences(j))
-            .filter(|inc| was_changed(inc.id) && inc.batch != UNLOCATED)
+            .filter(|inc| inc.local == 0 && was_changed(inc.id) && inc.batch != UNLOCATED)
             .map(|inc| (inc.batch, inc.element))
             .collect();
         vacated.sort_unstable();
         vacated.dedup();
         // (the columns are independent: made in parallel, in order)
         let this = &*self;
-        let new: Vec<NewColumn> = dirty_list
-            .par_iter()
-            .map(|&j| {
-                let (lo, hi) =
-                    (added.partition_point(|a| (a.0 as usize) < j), added.partition_point(|a| a.0 as usize <= j));
-                let staying = this.column_incidences(j).iter().filter(|inc| !was_changed(inc.id)).copied();
-                let incidences: Vec<Incidence> = staying.chain(added[lo..hi].iter().map(|a| a.1)).collect();
-                NewColumn::of(j, incidences, blocks_of)
-            })
+        let new: Vec<NewColumn> = (dirty_list.par_iter().with_min_len(COLUMN_TASK))
+            .map_init(
+                || place_table(num_blocks),
+                |places, &j| {
+                    let staying = this.column_incidences(j).iter().filter(|inc| !was_changed(inc.id)).copied();
+                    let fresh = &added[added_at[j] as usize..added_at[j + 1] as usize];
+                    NewColumn::of(j, staying.chain(fresh.iter().copied()).collect(), blocks_of, places)
+                },
+            )
             .collect();
         let mut which = vec![u32::MAX; num_blocks];
         dirty_list.iter().enumerate().for_each(|(k, &j)| which[j] = k as u32);
@@ -493,7 +523,7 @@ impl SparsePattern {
         let old_slots: Vec<usize> = self.slot_offsets.iter().map(|&o| o as usize).collect();
         let rows = new_starts(&old_rows, |j| fresh(j).map(|c| c.rows.len()), num_blocks);
         let incidences = new_starts(&old_incidences, |j| fresh(j).map(|c| c.incidences.len()), num_blocks);
-        let slots = new_starts(&old_slots, |j| fresh(j).map(NewColumn::slots), num_blocks);
+        let slots = new_starts(&old_slots, |j| fresh(j).map(|c| c.slots.len()), num_blocks);
         // the columns that stay the same move, then the new ones are written
         // (the scalar structure, if it was made, is made again when asked for)
         self.scalar = OnceLock::new();
@@ -509,22 +539,18 @@ impl SparsePattern {
         crate::resize_with_room(&mut self.col_stride, num_blocks, 0);
         crate::resize_with_room(&mut self.diagonal, num_blocks, 0);
         // the new columns written in parallel, each into its own stretches
-        let sizes: Vec<[usize; 3]> = new.iter().map(|c| [c.rows.len(), c.incidences.len(), c.slots()]).collect();
+        let sizes: Vec<[usize; 3]> = new.iter().map(|c| [c.rows.len(), c.incidences.len(), c.slots.len()]).collect();
         let block_parts = columns_of(&mut block_rows, &dirty_list, &rows, |k| sizes[k][0]);
         let inc_parts = columns_of(&mut self.incidences, &dirty_list, &incidences, |k| sizes[k][1]);
         let slot_parts = columns_of(&mut self.slots, &dirty_list, &slots, |k| sizes[k][2]);
-        let diagonals: Vec<u32> = (new.par_iter().zip(&dirty_list).zip(block_parts))
-            .zip(inc_parts.into_par_iter().zip(slot_parts))
-            .map(|(((column, &j), block_out), (inc_out, slot_out))| {
-                column.write(j, blocks_of, block_out, inc_out, slot_out)
-            })
-            .collect();
-        for ((&j, column), diagonal) in dirty_list.iter().zip(&new).zip(diagonals) {
-            (self.diagonal[j], self.col_stride[j]) = (diagonal, 3 * column.rows.len());
+        (new.par_iter().zip(block_parts).zip(inc_parts.into_par_iter().zip(slot_parts)))
+            .for_each(|((column, block_out), (inc_out, slot_out))| column.write(block_out, inc_out, slot_out));
+        for (&j, column) in dirty_list.iter().zip(&new) {
+            (self.diagonal[j], self.col_stride[j]) = (column.diagonal, 3 * column.rows.len());
         }
         (self.offsets, self.slot_offsets) = (narrow(incidences.iter().copied()), narrow(slots.iter().copied()));
         self.num_blocks = num_blocks;
-        self.blocks = block_structure(&rows, block_rows);
+        self.blocks = block_structure(&rows, block_rows, false);
         Unlocated { columns: dirty_list, vacated }
     }
 
@@ -581,10 +607,10 @@ impl SparsePattern {
     /// column written into its own stretch of the arrays, in parallel over
     /// runs of [`LAY_OUT_RUN`] columns (the arrays are the same whatever
     /// the thread count).
-    fn lay_out<'a>(blocks_of: &(impl Fn(u32) -> &'a [u32] + Sync), columns: Vec<NewColumn>) -> Self {
+    fn lay_out(columns: Vec<NewColumn>) -> Self {
         let num_blocks = columns.len();
         // per column: block rows, incidences, slots
-        let sizes = |c: &NewColumn| [c.rows.len(), c.incidences.len(), c.slots()];
+        let sizes = |c: &NewColumn| [c.rows.len(), c.incidences.len(), c.slots.len()];
         let mut starts: Vec<[usize; 3]> = Vec::with_capacity(num_blocks + 1);
         let mut at = [0usize; 3];
         for column in &columns {
@@ -609,25 +635,20 @@ impl SparsePattern {
         let runs: Vec<_> = (ranges.iter().cloned().zip(block_parts).zip(inc_parts).zip(slot_parts))
             .map(|(((range, b), i), s)| (range, b, i, s))
             .collect();
-        let diagonal: Vec<Vec<u32>> = runs
-            .into_par_iter()
-            .map(|(range, block_out, inc_out, slot_out)| {
-                let base = starts[range.start];
-                range
-                    .map(|j| {
-                        let [b, i, s] = std::array::from_fn(|k| starts[j][k] - base[k]);
-                        let [bs, is, ss] = sizes(&columns[j]);
-                        let block_out = &mut block_out[b..b + bs];
-                        let (inc_out, slot_out) = (&mut inc_out[i..i + is], &mut slot_out[s..s + ss]);
-                        columns[j].write(j, blocks_of, block_out, inc_out, slot_out)
-                    })
-                    .collect()
-            })
-            .collect();
-        let diagonal: Vec<u32> = diagonal.into_iter().flatten().collect();
+        runs.into_par_iter().for_each(|(range, block_out, inc_out, slot_out)| {
+            let base = starts[range.start];
+            for j in range {
+                let [b, i, s] = std::array::from_fn(|k| starts[j][k] - base[k]);
+                let [bs, is, ss] = sizes(&columns[j]);
+                let block_out = &mut block_out[b..b + bs];
+                let (inc_out, slot_out) = (&mut inc_out[i..i + is], &mut slot_out[s..s + ss]);
+                columns[j].write(block_out, inc_out, slot_out);
+            }
+        });
+        let diagonal: Vec<u32> = columns.iter().map(|c| c.diagonal).collect();
         let col_stride: Vec<usize> = columns.iter().map(|c| 3 * c.rows.len()).collect();
         let row_starts: Vec<usize> = starts.iter().map(|s| s[0]).collect();
-        let blocks = block_structure(&row_starts, block_rows);
+        let blocks = block_structure(&row_starts, block_rows, true);
         SparsePattern {
             num_blocks,
             blocks,

@@ -429,6 +429,17 @@ impl BlockStructure {
         }
     }
 
+    /// [`BlockStructure::from_columns`] for columns in order by
+    /// construction (a pattern updated after a cut, whose new columns are
+    /// sorted as they are made and whose other columns were checked when
+    /// first laid out): the check, a pass over every block row (17 % of
+    /// the update's instructions after a blade cut across bunny_100k), runs
+    /// in debug builds only.
+    pub(crate) fn from_ordered_columns(ptr: Vec<u32>, rows: Vec<u32>, start: Vec<usize>, nnz: usize) -> Self {
+        debug_assert!(Self::from_columns(ptr.clone(), rows.clone(), start.clone(), nnz).is_ok());
+        BlockStructure { ptr, rows, start }
+    }
+
     /// The block rows of block column `j`.
     pub fn column_rows(&self, j: usize) -> &[u32] {
         &self.rows[self.ptr[j] as usize..self.ptr[j + 1] as usize]
