@@ -392,11 +392,33 @@ pub(crate) fn classify(
     Ok(Classification { dist, side, straddling, crossed, kept_whole, on_plane })
 }
 
-/// A point of a prospective part: a node, or the crossing on an edge.
+/// A point of a prospective part: a node, or the crossing on an edge
+/// `(a, b)`, `a < b`, as one integer ordered as the pair of variants would
+/// be (the nodes by id, then the edges by their ends): node `v` is `v`,
+/// edge `(a, b)` is `(a + 1) 2³² + b`. Sorting and matching points is
+/// the trial split's most frequent operation; an enum of the two
+/// variants compared with branches took 4 % of a blade cut's CPU time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-enum Point {
-    Node(u32),
-    Edge(u32, u32),
+struct Point(u64);
+
+impl Point {
+    fn node(v: u32) -> Self {
+        Point(u64::from(v))
+    }
+
+    /// The crossing on the edge between nodes `a` and `b` (either order).
+    fn edge(a: u32, b: u32) -> Self {
+        let (a, b) = (a.min(b), a.max(b));
+        Point(((u64::from(a) + 1) << 32) | u64::from(b))
+    }
+
+    /// The node, or the edge's ends.
+    fn parts(self) -> Result<u32, (u32, u32)> {
+        match u32::try_from(self.0) {
+            Ok(v) => Ok(v),
+            Err(_) => Err((((self.0 >> 32) - 1) as u32, self.0 as u32)),
+        }
+    }
 }
 
 /// The two parts a trial split builds, kept by each thread from one trial
@@ -429,9 +451,9 @@ fn split_is_healthy(
     parts: &mut TrialParts,
 ) -> bool {
     let el = &mesh.elements[e];
-    let position = |p: Point| match p {
-        Point::Node(v) => mesh.nodes[v as usize],
-        Point::Edge(a, b) => crossing(&mesh.nodes, dist, a, b).3,
+    let position = |p: Point| match p.parts() {
+        Ok(v) => mesh.nodes[v as usize],
+        Err((a, b)) => crossing(&mesh.nodes, dist, a, b).3,
     };
     let TrialParts { loops, on_plane, cap_positions, points } = parts;
     loops.iter_mut().for_each(Loops::clear);
@@ -447,8 +469,8 @@ fn split_is_healthy(
             // the face's points on this part's side, and its crossings
             let points = (0..v.len()).flat_map(|i| {
                 let (a, b) = (v[i], v[(i + 1) % v.len()]);
-                let node = (side[a as usize] * sign >= 0).then_some(Point::Node(a));
-                let edge = (side[a as usize] * side[b as usize] < 0).then_some(Point::Edge(a.min(b), a.max(b)));
+                let node = (side[a as usize] * sign >= 0).then_some(Point::node(a));
+                let edge = (side[a as usize] * side[b as usize] < 0).then_some(Point::edge(a, b));
                 node.into_iter().chain(edge)
             });
             let keyed = points.map(|p| (p, position(p)));
@@ -906,4 +928,46 @@ pub(crate) fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let u = cross(a, n);
     let u = scale(u, 1.0 / norm(u));
     (u, cross(n, u))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Point;
+    use proptest::prelude::*;
+
+    /// A node or an edge as the pair of variants the integer stands for:
+    /// nodes first, by id, then edges by their ends.
+    fn variant(p: Result<u32, (u32, u32)>) -> (u8, u32, u32) {
+        match p {
+            Ok(v) => (0, v, 0),
+            Err((a, b)) => (1, a, b),
+        }
+    }
+
+    fn point() -> impl Strategy<Value = Result<u32, (u32, u32)>> {
+        let ids = prop_oneof![0..8u32, (u32::MAX - 8)..=u32::MAX, any::<u32>()];
+        prop_oneof![
+            ids.clone().prop_map(Ok),
+            (ids.clone(), ids).prop_filter("an edge joins two nodes", |(a, b)| a != b).prop_map(Err),
+        ]
+    }
+
+    fn make(p: Result<u32, (u32, u32)>) -> Point {
+        match p {
+            Ok(v) => Point::node(v),
+            Err((a, b)) => Point::edge(a, b),
+        }
+    }
+
+    proptest! {
+        /// Points compare as their variants would and give back their node
+        /// or their edge's ends (in increasing order), at every id.
+        #[test]
+        fn points_order_as_nodes_then_edges(p in point(), q in point()) {
+            let sorted = |p: Result<u32, (u32, u32)>| p.map_err(|(a, b)| (a.min(b), a.max(b)));
+            let (p, q) = (sorted(p), sorted(q));
+            prop_assert_eq!(make(p).parts(), p);
+            prop_assert_eq!(make(p).cmp(&make(q)), variant(p).cmp(&variant(q)));
+        }
+    }
 }
