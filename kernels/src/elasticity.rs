@@ -80,16 +80,22 @@ fn check_table(grad: &[f64], weights: &[f64], k: usize, scratch: &[f64], ke: &[f
 /// gradients `S[r][c] = ∫ G_r G_c` (`r = 3a + i`: component `i` of the
 /// gradient of function `a`), for `k` functions and Lamé parameters `λ`,
 /// `μ`: `K[3a+i][3b+j] = λ S[3a+i][3b+j] + μ S[3a+j][3b+i] + μ δ_ij tr`
-/// with `tr = Σ_l S[3a+l][3b+l]`. `s` holds the full symmetric `S`.
+/// with `tr = Σ_l S[3a+l][3b+l]`. `s` holds the full `S`, read on and
+/// above the block diagonal: the blocks below are the mirror images of
+/// those above (for a symmetric `S`, entry `(3b+j, 3a+i)` takes the same
+/// operations on the same values as `(3a+i, 3b+j)`), copied rather than
+/// computed again, so `K_e` is exactly symmetric.
 pub fn stiffness_from_gram(s: &[f64], k: usize, lambda: f64, mu: f64, ke: &mut [f64]) {
     let n = 3 * k;
     for a in 0..k {
-        for b in 0..k {
+        for b in a..k {
             let tr = s[(3 * a) * n + 3 * b] + s[(3 * a + 1) * n + 3 * b + 1] + s[(3 * a + 2) * n + 3 * b + 2];
             for i in 0..3 {
                 for j in 0..3 {
                     let v = lambda * s[(3 * a + i) * n + 3 * b + j] + mu * s[(3 * a + j) * n + 3 * b + i];
-                    ke[(3 * a + i) * n + 3 * b + j] = v + if i == j { mu * tr } else { 0.0 };
+                    let v = v + if i == j { mu * tr } else { 0.0 };
+                    ke[(3 * a + i) * n + 3 * b + j] = v;
+                    ke[(3 * b + j) * n + 3 * a + i] = v;
                 }
             }
         }
