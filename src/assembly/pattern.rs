@@ -457,6 +457,9 @@ impl SparsePattern {
         changed: &[u32],
         old_nodes: &[u32],
     ) -> Unlocated {
+        // (the counting sort below lists each block's new incidences in the
+        // order of `changed`, which must be the pattern's: by id)
+        debug_assert!(changed.windows(2).all(|w| w[0] < w[1]), "changed entries sorted");
         let kept = self.num_blocks;
         // (every column at or past the new end is "recomputed": it does not move)
         let mut dirty = vec![false; num_blocks.max(kept)];
