@@ -24,6 +24,18 @@ fn asset(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets").join(name)
 }
 
+/// `path` if the file is there; else says on stderr which rows are left
+/// out and why (the suite reads its meshes from the source tree it was
+/// built from, so a binary moved away from it, or a tree without the
+/// shared data, runs without them).
+fn present(path: std::path::PathBuf, rows: &str) -> Option<std::path::PathBuf> {
+    if path.exists() {
+        return Some(path);
+    }
+    eprintln!("bench: {rows} rows left out: {} not found", path.display());
+    None
+}
+
 /// A part of the suite, to run alone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Group {
@@ -381,8 +393,8 @@ fn step_suite(quick: bool, material: &Material) -> Result<Vec<Measurement>, Erro
         extra: Some(("polyhedra".into(), (ne - store.batches[0].len()) as f64)),
     });
     // corotated implicit steps: the bunny (if its asset is here) and a box
-    let bunny = asset("bunny_100k.mesh");
-    if !quick && bunny.exists() {
+    let bunny = if quick { None } else { present(asset("bunny_100k.mesh"), "bunny_100k step and cut") };
+    if let Some(bunny) = bunny {
         // in the file's numbering, and renumbered for locality as a scene
         // loads it
         let mesh = cleave::io::read_mesh(&bunny)?;
@@ -403,8 +415,7 @@ fn step_suite(quick: bool, material: &Material) -> Result<Vec<Measurement>, Erro
             out.extend(large_cut_measurements(label, mesh)?);
         }
     }
-    let bunny = asset("bunny_5k.mesh");
-    if bunny.exists() {
+    if let Some(bunny) = present(asset("bunny_5k.mesh"), "bunny_5k cut") {
         out.extend(cut_measurements(cleave::io::read_mesh(&bunny)?)?);
     }
     let cells = if quick { [16, 4, 4] } else { [100, 50, 34] };
@@ -789,7 +800,8 @@ fn meshing_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
         out.push(mesh_row("octree", format!("bunny.obj, depth {depth}"), &mesh, ms, None));
     }
     let closed = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/bunny_closed.obj");
-    if !quick && closed.exists() {
+    let closed = if quick { None } else { present(closed, "embedded bunny_closed") };
+    if let Some(closed) = closed {
         let (fine, _) = cleave::surface::prepare(&cleave::io::read_surface(&closed)?)?;
         // an octree mesh of about 10^4 mean value cells of the same bunny,
         // and its surface in it
