@@ -275,16 +275,14 @@ impl Batch {
     ) {
         // (with room to spare, [`crate::reserve_room`]: the first cut would
         // otherwise copy the whole batch of a mesh's tetrahedra to grow it)
-        use crate::{populate, reserve_room, resize_with_room};
+        use crate::{reserve_room, reserve_to_write, resize_with_room};
         let (k, n) = (self.k, self.len() + elements.len());
         reserve_room(&mut self.elements, n);
         self.elements.extend_from_slice(elements);
         let start = self.nodes.len();
-        reserve_room(&mut self.nodes, n * k);
-        populate(&mut self.nodes, n * k);
+        reserve_to_write(&mut self.nodes, n * k);
         self.nodes.extend(elements.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()));
-        reserve_room(&mut self.rest, n * k);
-        populate(&mut self.rest, n * k);
+        reserve_to_write(&mut self.rest, n * k);
         self.rest.extend(self.nodes[start..].iter().map(|&v| mesh.nodes[v as usize]));
         resize_with_room(&mut self.volume, n, 0.0);
         resize_with_room(&mut self.mass_fraction, n * k, 0.0);
