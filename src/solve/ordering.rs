@@ -199,11 +199,13 @@ pub(super) struct Renumbering {
     /// Per new block column, the first value of its old column.
     old_start: Vec<usize>,
     /// Per block of the new structure, in its order: the place of the same
-    /// block among the rows of its old column.
+    /// block among the rows of its old column (empty for the identity,
+    /// where every block keeps its place).
     source: Vec<u32>,
     /// Per new block column, its old column's rows in their old order,
     /// numbered in the new numbering: with `old_start`, the old values read
-    /// as the new columns (see [`Renumbering::old_columns`]).
+    /// as the new columns (see [`Renumbering::old_columns`]; empty for the
+    /// identity, where they are the renumbered structure's rows).
     unsorted: Vec<u32>,
     /// The renumbered structure.
     blocks: BlockStructure,
@@ -215,7 +217,8 @@ pub(super) struct Renumbering {
     analysed: usize,
     /// Whether `order` is the identity (the whole analysis kept the
     /// structure's own order, and blocks were appended since): the
-    /// renumbered structure is then the structure itself, copied.
+    /// renumbered structure is then the structure itself, copied, and the
+    /// values keep their layout.
     identity: bool,
     /// The renumbering before the last [`Renumbering::renew`], whose sorted
     /// columns an appended order reuses (and whose arrays the next renewal
@@ -246,7 +249,9 @@ impl Renumbering {
     /// carrying values and vectors is then streaming them).
     ///
     /// In the structure's own order (the identity), the renumbered columns
-    /// are copies of its columns. Otherwise a column whose rows did not
+    /// are copies of its columns, and no permutation of them is kept (on
+    /// renumbered bunny_100k, a cut then writes a third of the arrays it
+    /// wrote). Otherwise a column whose rows did not
     /// change keeps its sorted permutation, and only the columns a cut
     /// changed are sorted again (on bunny_100k, sorting every column took
     /// 5.5-6 ms of a cut on 2 threads).
@@ -298,8 +303,9 @@ impl Renumbering {
         blocks.start.extend(blocks.ptr[..n].iter().map(|&p| 9 * p as usize));
         let total = old.rows_len();
         crate::resize_with_room(&mut blocks.rows, total, 0);
-        crate::resize_with_room(&mut self.source, total, 0);
-        crate::resize_with_room(&mut self.unsorted, total, 0);
+        let permuted = if self.identity { 0 } else { total };
+        crate::resize_with_room(&mut self.source, permuted, 0);
+        crate::resize_with_room(&mut self.unsorted, permuted, 0);
         // each task copies its columns' rows (in the structure's own order),
         // or sorts them into their new numbers, reusing the last sorted
         // permutation of a column that did not change
@@ -308,15 +314,7 @@ impl Renumbering {
         let sort = |columns: Range<usize>, (rows, (source, unsorted)): (Along<u32>, (Along<u32>, Along<u32>))| {
             let (rows, source, unsorted) = (rows.0, source.0, unsorted.0);
             if identity {
-                let span = old.ptr[columns.start] as usize..old.ptr[columns.end] as usize;
-                rows.copy_from_slice(&old.rows[span.clone()]);
-                unsorted.copy_from_slice(&old.rows[span]);
-                let mut at = 0;
-                for j in columns {
-                    let len = old.column_rows(j).len();
-                    source[at..at + len].iter_mut().zip(0..).for_each(|(q, k)| *q = k);
-                    at += len;
-                }
+                rows.copy_from_slice(&old.rows[old.ptr[columns.start] as usize..old.ptr[columns.end] as usize]);
                 return;
             }
             let mut at = 0;
@@ -398,7 +396,18 @@ impl Renumbering {
     /// takes and gives vectors in the new numbering, summed as on the old
     /// structure).
     pub fn old_columns(&self) -> BlockColumns<'_> {
-        BlockColumns { ptr: &self.blocks.ptr, rows: &self.unsorted, start: &self.old_start }
+        let rows = if self.identity { &self.blocks.rows } else { &self.unsorted };
+        BlockColumns { ptr: &self.blocks.ptr, rows, start: &self.old_start }
+    }
+
+    /// The place among the rows of new column `j`'s old column of the
+    /// block at place `p` of the new column.
+    fn source(&self, j: usize, p: usize) -> usize {
+        if self.identity {
+            p
+        } else {
+            self.source[self.blocks.ptr[j] as usize + p] as usize
+        }
     }
 
     /// Writes the values `old` (laid out on the old structure) in the new
@@ -426,8 +435,7 @@ impl Renumbering {
         combine: impl Fn(R, R) -> R + Sync,
     ) -> (bool, bool, R) {
         let column_done = |j: usize, q: usize, column: &[f64], out: &[f32], (diagonals, _): &mut (Along<D>, P)| {
-            let (stride, at) =
-                (column.len() / 3, 3 * self.source[self.blocks.ptr[j] as usize + self.diagonal[j] as usize] as usize);
+            let (stride, at) = (column.len() / 3, 3 * self.source(j, self.diagonal[j] as usize));
             let block = std::array::from_fn(|e| column[(e % 3) * stride + at + e / 3]);
             diagonals.0[q] = diagonal(block);
             out.iter().all(|v| v.is_finite())
@@ -494,15 +502,19 @@ impl Renumbering {
                 if j + 1 < columns.end {
                     old_column(j + 1).iter().step_by(8).for_each(crate::assembly::prefetch);
                 }
-                let source = &self.source[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
-                let stride = 3 * source.len();
+                let stride = 3 * (blocks.ptr[j + 1] - blocks.ptr[j]) as usize;
                 let column = old_column(j);
                 let out = &mut out[at..at + 3 * stride];
-                for (column, out) in column.chunks_exact(stride).zip(out.chunks_exact_mut(stride)) {
-                    for (to, &q) in out.chunks_exact_mut(3).zip(source) {
-                        let q = 3 * q as usize;
-                        let from = &column[q..q + 3];
-                        (to[0], to[1], to[2]) = (convert(from[0]), convert(from[1]), convert(from[2]));
+                if self.identity {
+                    out.iter_mut().zip(column).for_each(|(to, &from)| *to = convert(from));
+                } else {
+                    let source = &self.source[blocks.ptr[j] as usize..blocks.ptr[j + 1] as usize];
+                    for (column, out) in column.chunks_exact(stride).zip(out.chunks_exact_mut(stride)) {
+                        for (to, &q) in out.chunks_exact_mut(3).zip(source) {
+                            let q = 3 * q as usize;
+                            let from = &column[q..q + 3];
+                            (to[0], to[1], to[2]) = (convert(from[0]), convert(from[1]), convert(from[2]));
+                        }
                     }
                 }
                 checked &= column_done(j, j - first, column, out, &mut parts);
@@ -553,9 +565,10 @@ pub(super) trait AlongColumns: Send + Sized {
 pub(super) struct Along<'a, T>(pub &'a mut [T], usize, usize);
 
 impl<'a, T> Along<'a, T> {
-    /// One item per block.
+    /// One item per block, or none when `items` is empty.
     fn blocks(items: &'a mut [T]) -> Self {
-        Along(items, 1, 0)
+        let per_block = usize::from(!items.is_empty());
+        Along(items, per_block, 0)
     }
 
     /// The nine values of each block.
@@ -858,12 +871,25 @@ mod tests {
         (finite, in_range)
     }
 
-    /// [`shuffled_grid`]`(m)`, values for it, and its renumbering.
-    fn renumbered_grid(m: usize) -> (BlockStructure, Vec<f64>, Renumbering) {
-        let old = shuffled_grid(m);
+    /// [`shuffled_grid`]`(m)`, or (`banded`) its renumbered structure,
+    /// whose own order is kept (the renumbering is the identity).
+    fn grid(m: usize, banded: bool) -> BlockStructure {
+        let shuffled = shuffled_grid(m);
+        if !banded {
+            return shuffled;
+        }
+        let mut renumbering = Renumbering::default();
+        renumbering.renew(&shuffled);
+        renumbering.blocks().clone()
+    }
+
+    /// [`grid`]`(m, banded)`, values for it, and its renumbering.
+    fn renumbered_grid(m: usize, banded: bool) -> (BlockStructure, Vec<f64>, Renumbering) {
+        let old = grid(m, banded);
         let values: Vec<f64> = (0..9 * old.rows_len()).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.01).collect();
         let mut renumbering = Renumbering::default();
         renumbering.renew(&old);
+        assert_eq!(renumbering.identity, banded);
         (old, values, renumbering)
     }
 
@@ -872,7 +898,7 @@ mod tests {
     /// the whole rounded matrix sliced in one go.
     #[test]
     fn the_tasks_slice_the_rounded_values_as_a_whole_fill_does() {
-        let (old, values, renumbering) = renumbered_grid(9);
+        let (old, values, renumbering) = renumbered_grid(9, false);
         let (blocks, n) = (renumbering.blocks(), old.len());
         assert!(n > 2 * TASK_COLUMNS, "{n} blocks: more than one task");
         let layout = SlicedLayout::new(blocks.columns(), n);
@@ -893,10 +919,17 @@ mod tests {
     /// multiply a vector in the new numbering as the old structure
     /// multiplies it in the old one, bit for bit (the same sums in the
     /// same order), within the tasks of a pass that carries them; the
-    /// tasks' results combine over every column once.
+    /// tasks' results combine over every column once. So too where the
+    /// renumbering is the identity.
     #[test]
     fn products_on_the_old_values_in_the_new_numbering_are_the_old_products() {
-        let (old, values, renumbering) = renumbered_grid(6);
+        for banded in [false, true] {
+            products_in_the_new_numbering(banded);
+        }
+    }
+
+    fn products_in_the_new_numbering(banded: bool) {
+        let (old, values, renumbering) = renumbered_grid(6, banded);
         let n = old.len();
         let x_old: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.37).sin()).collect();
         let mut x_new = vec![[0.0; 3]; n];
@@ -925,10 +958,16 @@ mod tests {
     /// The carried values are the renumbered matrix `Q A Qᵀ`, entry by
     /// entry, and their `f32` roundings; every column's rows ascend; the
     /// vector maps are each other's inverse; a value that is not finite,
-    /// or not finite in `f32`, is reported.
+    /// or not finite in `f32`, is reported. So too where the renumbering
+    /// is the identity.
     #[test]
     fn carried_values_are_the_renumbered_matrix() {
-        let old = shuffled_grid(5);
+        for banded in [false, true] {
+            carried_values(&grid(5, banded));
+        }
+    }
+
+    fn carried_values(old: &BlockStructure) {
         let entry = |i: usize, j: usize, e: usize| (i * 31 + j * 7 + e) as f64 * 1.000_000_1;
         let mut values = vec![0.0; 9 * old.rows_len()];
         for j in 0..old.len() {
@@ -941,7 +980,7 @@ mod tests {
             }
         }
         let mut renumbering = Renumbering::default();
-        renumbering.renew(&old);
+        renumbering.renew(old);
         let (mut out, mut rounded) = (vec![0.0; values.len()], vec![0.0f32; values.len()]);
         let mut diagonals = vec![[0.0; 9]; old.len()];
         assert_eq!(round(&renumbering, &values, &mut rounded, &mut diagonals), (true, true));
