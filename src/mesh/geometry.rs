@@ -157,7 +157,12 @@ pub fn fold_depth_on<K: Copy + Ord>(loops: &Loops<K>, planes: &[LoopPlane]) -> f
     for uses in edges.chunk_by(|x, y| x.0 == y.0) {
         let first = uses[0].1;
         for &(_, k) in &uses[1..] {
-            worst = worst.max(outside(k, first).min(outside(first, k)));
+            // (a fold no deeper than `outside(k, first)` cannot deepen the
+            // worst one found: the other side is measured only when it may)
+            let one_side = outside(k, first);
+            if !(one_side <= worst) {
+                worst = worst.max(one_side.min(outside(first, k)));
+            }
         }
     }
     worst
