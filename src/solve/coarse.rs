@@ -228,8 +228,7 @@ impl CoarseSpace {
                         table_of = b;
                     }
                     let runs = run_ptr[j] as usize..run_ptr[j + 1] as usize;
-                    for (slot, &a) in slots[runs.start - first..runs.end - first].iter_mut().zip(&run_aggregate[runs])
-                    {
+                    for (slot, &a) in slots[runs.start - first..runs.end - first].iter_mut().zip(&run_aggregate[runs]) {
                         *slot = slot_in[a as usize];
                         // (the graph is made of the runs: see the test
                         // `the_aggregates_graph_and_the_runs_follow_the_block_rows`)
