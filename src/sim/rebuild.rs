@@ -175,14 +175,16 @@ impl Simulation {
             return Err(Error::Internal(message));
         }
         // the check of the touched elements and their data (on every thread)
-        // beside the pattern's structure, which reads only the mesh, and the
-        // solver's analysis of it (mostly moving arrays, on one thread);
-        // both are undone if the check or the store refuses an element
+        // beside the pattern's structure, which reads only the mesh, the
+        // solver's analysis of it (mostly moving arrays, on one thread) and
+        // the node states carried over; all are undone if the check or the
+        // store refuses an element
         let (store, pattern, system, p) = (&mut nodal.store, &mut self.pattern, &mut self.system, &self.params);
+        let (state, masses) = (&mut self.state, &self.masses);
         let n = mesh.nodes.len();
         let elements_of = |e: u32| mesh.elements.get(e as usize).map_or(&[][..], |el| &el.nodes[..]);
         let t = std::time::Instant::now();
-        let ((built, check_seconds, store_seconds), ((unlocated, pattern_seconds), ((), analysis_seconds))) =
+        let ((built, check_seconds, store_seconds), (((unlocated, pattern_seconds), ((), analysis_seconds)), carried)) =
             rayon::join(
                 || {
                     let (checked, check_seconds) = timed(|| check(mesh));
@@ -201,7 +203,8 @@ impl Simulation {
                         system.renew(kind, pattern, p.tolerance, p.max_iterations);
                         let _analysed = system.ensure_analysed(pattern);
                     });
-                    (update, analysis)
+                    let carried = carry_node_states(cut, mesh, &origins, masses, state);
+                    ((update, analysis), carried)
                 },
             );
         // (the branches overlap: the rebuild books its time, the pattern and
@@ -210,11 +213,18 @@ impl Simulation {
         self.timings.add(Phase::Basis, store_seconds);
         self.timings.add(Phase::Assembly, pattern_seconds.min(beside));
         self.timings.add(Phase::Solve, (beside - pattern_seconds).clamp(0.0, analysis_seconds));
+        let (changed_nodes, before) = carried;
         let changes = match built {
             Ok(changes) => changes,
             Err(error) => {
-                // the store still holds the elements as they were
-                // (the columns to put back: those of the touched elements now)
+                // the store still holds the elements as they were, the
+                // node states their old nodes' only after the carried ones
+                // are taken off (the columns to put back: those of the
+                // touched elements now)
+                let nodes_before = cut.nodes_before as usize;
+                for field in [&mut state.displacement, &mut state.velocity, &mut state.previous_velocity] {
+                    field.truncate(nodes_before);
+                }
                 let store = &nodal.store;
                 let now: Vec<u32> = touched.iter().flat_map(|&e| elements_of(e).iter().copied()).collect();
                 let undo = pattern.update(cut.nodes_before as usize, &|e| store.element_nodes(e), touched, &now);
@@ -226,19 +236,7 @@ impl Simulation {
         if let Some(diameters) = &mut self.node_diameters {
             raise_node_diameters(mesh, touched.par_iter().map(|&e| e as usize), diameters);
         }
-        // the nodes whose mass changes: those of the touched elements,
-        // before and after
         let store = &nodal.store;
-        let mut changed_nodes = cut.old_nodes.clone();
-        changed_nodes.extend(store.nodes_of(touched));
-        changed_nodes.par_sort_unstable();
-        changed_nodes.dedup();
-        let old_changed: Vec<u32> = changed_nodes.iter().copied().filter(|&v| v < cut.nodes_before).collect();
-        let state = &mut self.state;
-        let before = momenta(&old_changed, &self.masses, &state.position, &state.velocity);
-        origins.extend(&mut state.displacement);
-        origins.extend(&mut state.velocity);
-        origins.extend(&mut state.previous_velocity);
         // the pattern's entries located in the new store, beside the
         // rotations (which do not read it)
         let corotation = &mut nodal.corotation;
@@ -252,11 +250,13 @@ impl Simulation {
         );
         self.timings.add(Phase::Assembly, locate_seconds);
         // only the changed nodes' masses change ([`super::nodal_masses`]),
-        // read through the located pattern
+        // read through the located pattern (each node's sum in its order)
+        let changed_masses: Vec<f64> = changed_nodes
+            .par_iter()
+            .map(|&v| store.lumped_mass(pattern.held_at(v as usize), p.material.density))
+            .collect();
         masses.resize(n, 0.0);
-        for &v in &changed_nodes {
-            masses[v as usize] = store.lumped_mass(pattern.held_at(v as usize), p.material.density);
-        }
+        changed_nodes.iter().zip(changed_masses).for_each(|(&v, m)| masses[v as usize] = m);
         loads.clone_from(masses);
         conserve_momentum(&changed_nodes, masses, &state.position, &mut state.velocity, before);
         self.statics = None;
@@ -339,6 +339,31 @@ impl Simulation {
             }
         })
     }
+}
+
+/// The node states of a cut mesh `mesh` carried over to its new nodes
+/// ([`NodeOrigins`]), appended to the `state`'s displacements and
+/// velocities; returns the nodes whose masses change (those of the
+/// touched elements, before and after the cut, ascending) and the linear
+/// and angular momenta of the old ones among them, with their old
+/// `masses` and velocities ([`momenta`]).
+fn carry_node_states(
+    cut: &CutReport,
+    mesh: &PolyMesh,
+    origins: &NodeOrigins,
+    masses: &[f64],
+    state: &mut super::NodeState,
+) -> (Vec<u32>, ([f64; 3], [f64; 3])) {
+    let mut changed_nodes = cut.old_nodes.clone();
+    changed_nodes.extend(cut.touched.iter().flat_map(|&e| mesh.elements[e as usize].nodes.iter().copied()));
+    changed_nodes.sort_unstable();
+    changed_nodes.dedup();
+    let old_changed = &changed_nodes[..changed_nodes.partition_point(|&v| v < cut.nodes_before)];
+    let before = momenta(old_changed, masses, &state.position, &state.velocity);
+    origins.extend(&mut state.displacement);
+    origins.extend(&mut state.velocity);
+    origins.extend(&mut state.previous_velocity);
+    (changed_nodes, before)
 }
 
 /// `f`'s result and the wall time it took (s).
