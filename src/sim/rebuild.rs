@@ -144,14 +144,14 @@ impl Simulation {
 
     /// Checks the touched elements of a cut mesh and rebuilds their data
     /// (the store checks their health) while the pattern's columns of
-    /// their nodes are updated and the solver analyses the new pattern,
-    /// then carries the state over to the new nodes ([`NodeOrigins`]),
+    /// their nodes are updated, the solver analyses the new pattern and
+    /// the state is carried over to the new nodes ([`NodeOrigins`]), then
     /// updates the masses, restores the momenta of the nodes whose masses
     /// changed, and brings the rotations (untouched elements keep theirs,
     /// new ones get theirs) up to date, and leaves the boundary surface to
     /// be rebuilt when next asked for. Nothing but the mesh has changed
     /// when it fails (the pattern is put back, and the solver analyses it
-    /// again when next asked to).
+    /// again when next asked to; the carried states are taken off).
     pub(super) fn apply_cut(&mut self, report: &PolygonCutReport) -> Result<(), Error> {
         let (mesh, cut) = (&self.mesh, &report.cut);
         let touched = &cut.touched;
