@@ -217,10 +217,9 @@ impl Simulation {
         let changes = match built {
             Ok(changes) => changes,
             Err(error) => {
-                // the store still holds the elements as they were, the
-                // node states their old nodes' only after the carried ones
-                // are taken off (the columns to put back: those of the
-                // touched elements now)
+                // the store still holds the elements as they were; the
+                // carried node states are taken off (the columns to put
+                // back: those of the touched elements now)
                 let nodes_before = cut.nodes_before as usize;
                 for field in [&mut state.displacement, &mut state.velocity, &mut state.previous_velocity] {
                     field.truncate(nodes_before);
