@@ -593,6 +593,7 @@ fn tile_inverse<T: inverse_factor::Stored>(factor: &[f64], n: usize, square: &mu
         MatRef::from_column_major_slice(&factor[..n * n], n, n),
         Par::Seq,
     );
+    cleave_kernels::lanes::clear_upper_registers();
     inverse_factor::tile(square, n, tiled);
 }
 

@@ -99,6 +99,7 @@ impl Cholesky {
             Par::Seq,
             MemStack::new(buf),
         );
+        cleave_kernels::lanes::clear_upper_registers();
         Ok(())
     }
 
@@ -176,8 +177,8 @@ impl LinearSolver for Cholesky {
         }
         self.factored = false;
         let l_values = &mut self.l_values;
-        crate::in_pool(|| {
-            sym.factorize_numeric_llt(
+        let factored = crate::in_pool(|| {
+            let factored = sym.factorize_numeric_llt(
                 l_values,
                 matrix,
                 Side::Lower,
@@ -185,9 +186,11 @@ impl LinearSolver for Cholesky {
                 par,
                 MemStack::new(buf),
                 Default::default(),
-            )
-        })
-        .map_err(|e| match e {
+            );
+            cleave_kernels::lanes::clear_upper_registers();
+            factored
+        });
+        factored.map_err(|e| match e {
             faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => {
                 SolveError::NotPositiveDefinite { pivot: index, n: matrix.nrows() }
             }

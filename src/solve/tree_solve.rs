@@ -22,6 +22,7 @@
 //! The tasks and chunks depend on the factor's structure alone, never on
 //! the threads.
 
+use cleave_kernels::lanes::clear_upper_registers;
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
 use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
@@ -309,6 +310,7 @@ fn solve_columns(node: &Supernode<'_>, x_top: &mut [f64], products: &mut [f64]) 
     solve_lower_triangular_in_place(l_top, x_top.as_mut(), Par::Seq);
     let out = MatMut::from_column_major_slice_mut(products, l_bot.nrows(), 1);
     matmul(out, Accum::Replace, l_bot, x_top.as_ref(), 1.0, Par::Seq);
+    clear_upper_registers();
 }
 
 /// Backward step of one supernode, given the solved values of its rows
@@ -320,6 +322,7 @@ fn solve_columns_transposed(node: &Supernode<'_>, x_top: &mut [f64], gathered: &
     let below = MatRef::from_column_major_slice(gathered, gathered.len(), 1);
     matmul(x_top.as_mut(), Accum::Add, l_bot.transpose(), below, -1.0, Par::Seq);
     solve_upper_triangular_in_place(l_top.transpose(), x_top, Par::Seq);
+    clear_upper_registers();
 }
 
 /// Columns per panel of a top supernode: the panel's triangle is solved by
@@ -348,11 +351,13 @@ fn forward_in_panels(l: MatRef<'_, f64>, column: &mut [f64]) {
             MatMut::from_column_major_slice_mut(panel, end - c, 1),
             Par::Seq,
         );
+        clear_upper_registers();
         let panel = MatRef::from_column_major_slice(panel, end - c, 1);
         below.par_chunks_mut(PANEL_ROWS).enumerate().for_each(|(k, rows)| {
             let (first, n) = (end + k * PANEL_ROWS, rows.len());
             let out = MatMut::from_column_major_slice_mut(rows, n, 1);
             matmul(out, Accum::Add, l.submatrix(first, c, n, end - c), panel, -1.0, Par::Seq);
+            clear_upper_registers();
         });
     }
 }
@@ -373,6 +378,7 @@ fn backward_in_panels(l: MatRef<'_, f64>, column: &mut [f64]) {
             let lhs = l.submatrix(end, first, below.nrows(), n).transpose();
             let out = MatMut::from_column_major_slice_mut(columns, n, 1);
             matmul(out, Accum::Add, lhs, below, -1.0, Par::Seq);
+            clear_upper_registers();
         });
         solve_upper_triangular_in_place(
             l.submatrix(c, c, end - c, end - c).transpose(),
@@ -380,4 +386,5 @@ fn backward_in_panels(l: MatRef<'_, f64>, column: &mut [f64]) {
             Par::Seq,
         );
     }
+    clear_upper_registers();
 }

@@ -14,7 +14,7 @@
 //! makes by calls to the library's `fma`: their speed-ups include that.
 
 use cleave::Error;
-use cleave_kernels::lanes::{cap_simd_level, SimdLevel};
+use cleave_kernels::lanes::{self, cap_simd_level, SimdLevel};
 use cleave_kernels::{
     elasticity, envelope, harmonic, inverse_factor, logarithm, moments, polynomial, rotation, spectrum, spmv,
 };
@@ -404,7 +404,55 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
             out.push(row(format!("{} {level:?}", kernel.name), median(t), median(&ratios)));
         }
     }
+    out.extend(upper_registers_measurements(rounds));
     Ok(out)
+}
+
+/// A plain (SSE) loop, the kind the engine runs outside its dispatched
+/// kernels (the distance scan of the harmonic kernel centres' placement,
+/// 50 times over 4,000 points), timed right after a faer matrix product (64 x 64):
+/// with the vector registers' upper halves as the product's assembly
+/// leaves them, and cleared by [`lanes::clear_upper_registers`], as the
+/// engine does after faer's products. Rounds alternate; the ratio is the
+/// median of theirs.
+fn upper_registers_measurements(rounds: usize) -> Vec<Measurement> {
+    use faer::linalg::matmul::matmul;
+    #[inline(never)]
+    fn scan(points: &[[f64; 3]], p: [f64; 3], r2: f64) -> usize {
+        points.iter().filter(|k| (0..3).map(|i| (k[i] - p[i]).powi(2)).sum::<f64>() >= r2).count()
+    }
+    let points: Vec<[f64; 3]> = (0..4000).map(|i| std::array::from_fn(|d| noise(3 * i + d))).collect();
+    let a = faer::Mat::<f64>::from_fn(64, 64, |i, j| noise(64 * i + j));
+    let mut product = faer::Mat::<f64>::zeros(64, 64);
+    let mut after = |clear: bool| {
+        (0..20)
+            .map(|_| {
+                matmul(product.as_mut(), faer::Accum::Replace, a.as_ref(), a.as_ref(), 1.0, faer::Par::Seq);
+                if clear {
+                    lanes::clear_upper_registers();
+                }
+                let start = std::time::Instant::now();
+                (0..50).for_each(|_| _ = std::hint::black_box(scan(&points, [0.1, 0.2, 0.3], 0.04)));
+                start.elapsed().as_secs_f64() * 1e3
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (mut left, mut cleared) = (Vec::new(), Vec::new());
+    for _ in 0..rounds {
+        left.push(after(false));
+        cleared.push(after(true));
+    }
+    let ratios: Vec<f64> = left.iter().zip(&cleared).map(|(l, c)| l / c).collect();
+    let row = |name: &str, ms: f64, ratio: f64| Measurement {
+        name: format!("plain loop after a faer product, {name}"),
+        mesh: "50 x 4000 points".into(),
+        elements: 0,
+        nodes: 0,
+        ms,
+        elements_per_s: 0.0,
+        extra: Some((format!("time over cleared (median of {rounds} rounds)"), ratio)),
+    };
+    vec![row("registers as left", median(&left), median(&ratios)), row("upper halves cleared", median(&cleared), 1.0)]
 }
 
 /// The median of `values` (the mean of the middle two for an even count).

@@ -166,6 +166,7 @@ impl ElementBasis {
                 }
             }
         }
+        cleave_kernels::lanes::clear_upper_registers();
         for (a, l) in self.linear.iter().enumerate() {
             if let Some(phi) = phi.as_deref_mut() {
                 for (q, p) in points.iter().enumerate() {

@@ -253,7 +253,9 @@ pub(super) fn fit_by<const D: usize>(
                 MatMut::from_row_major_slice_mut(&mut coefficients, cols, k).copy_from(x);
                 true
             }
-        })?;
+        });
+        cleave_kernels::lanes::clear_upper_registers();
+        let method = method?;
         reproduce_linear::<D>(&mut coefficients, n, nodes)?;
         if !coefficients.iter().all(|c| c.is_finite()) {
             return None;
@@ -265,6 +267,7 @@ pub(super) fn fit_by<const D: usize>(
         let c = MatRef::from_row_major_slice(&coefficients, cols, k);
         let mut values = MatMut::from_column_major_slice_mut(values, m, k);
         matmul(values.as_mut(), Accum::Replace, a, c, 1.0, Par::Seq);
+        cleave_kernels::lanes::clear_upper_registers();
         for i in 0..m {
             for a in 0..k {
                 let d = values[(i, a)] / weights[i] - targets[i * k + a];
