@@ -345,7 +345,7 @@ fn fit_element(
         let f = r.face as usize;
         faces[f]
             .as_ref()?
-            .interior_samples(&mesh.nodes, &mesh.faces[f], FACE_SPACING * h, |p, _| samples.push((hat(p), *n)));
+            .interior_points(&mesh.nodes, &mesh.faces[f], FACE_SPACING * h, |p| samples.push((hat(p), *n)));
     }
     let scaled: Vec<[f64; 3]> = x.iter().map(|&p| hat(p)).collect();
     let mut first_triangle = 0;

@@ -170,7 +170,19 @@ impl FaceBasis {
 
     /// Visits points strictly inside the face at spacing about `h` (m) with
     /// the values of the loop vertices' functions there (loop order).
-    pub fn interior_samples(&self, nodes: &[[f64; 3]], face: &Face, h: f64, mut visit: impl FnMut([f64; 3], &[f64])) {
+    pub fn interior_samples(&self, nodes: &[[f64; 3]], face: &Face, h: f64, visit: impl FnMut([f64; 3], &[f64])) {
+        self.interior(nodes, face, h, true, visit);
+    }
+
+    /// The points of [`FaceBasis::interior_samples`] alone (the MFS face
+    /// functions are not evaluated there).
+    pub fn interior_points(&self, nodes: &[[f64; 3]], face: &Face, h: f64, mut visit: impl FnMut([f64; 3])) {
+        self.interior(nodes, face, h, false, |p, _| visit(p));
+    }
+
+    /// [`FaceBasis::interior_samples`], with the MFS functions' values
+    /// only when `values` (zeros otherwise).
+    fn interior(&self, nodes: &[[f64; 3]], face: &Face, h: f64, values: bool, mut visit: impl FnMut([f64; 3], &[f64])) {
         let kf = face.vertices.len();
         let mut vals = vec![0.0; kf];
         match &self.function {
@@ -190,7 +202,11 @@ impl FaceBasis {
                     let p = t.map(|v| nodes[v as usize]);
                     triangle_grid(p, h, |x, l| {
                         match &self.function {
-                            FaceFunction::Harmonic(mfs) => mfs.values(x, &mut vals),
+                            FaceFunction::Harmonic(mfs) => {
+                                if values {
+                                    mfs.values(x, &mut vals)
+                                }
+                            }
                             _ => {
                                 vals.fill(0.0);
                                 for i in 0..3 {
