@@ -187,6 +187,9 @@ impl LinearSolver for Cholesky {
                 MemStack::new(buf),
                 Default::default(),
             );
+            // (this thread's; the other threads' are cleared by the next
+            // dispatched kernel they run: clearing them all here would
+            // take a broadcast, which allocates)
             cleave_kernels::lanes::clear_upper_registers();
             factored
         });
