@@ -60,6 +60,9 @@ pub fn prepare_thread() {
     .expect("the identity is positive definite");
     let mut inverse = faer::Mat::<f64>::zeros(n, n);
     faer::linalg::triangular_inverse::invert_lower_triangular(inverse.as_mut(), a.as_ref(), faer::Par::Seq);
+    // (run as a pool's start handler, it would leave every thread of the
+    // pool with the registers faer's products leave in use)
+    cleave_kernels::lanes::clear_upper_registers();
 }
 
 /// A failed solve.
