@@ -29,7 +29,7 @@ use thiserror::Error;
 pub const MAGIC: [u8; 8] = *b"CLEAVECK";
 
 /// The version of the format and of every type it stores.
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 
 /// Bytes before the payload.
 const HEADER: usize = 24;

@@ -382,8 +382,6 @@ pub(super) fn build_batch(
         lame: (lambda, mu),
         stress_grads,
         triangles: Default::default(),
-        points: Vec::new(),
-        weights: Vec::new(),
         points_per_element: 0,
         dg: bases,
     };

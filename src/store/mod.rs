@@ -185,11 +185,9 @@ pub struct Batch {
     /// Surface triangles in local indices, outward, `2k - 4` per element
     /// (empty for the closed-form tetrahedra).
     pub triangles: Vec<[u32; 3]>,
-    /// Quadrature points (m), `points_per_element` per element.
-    pub points: Vec<[f64; 3]>,
-    /// Quadrature weights (m^3), `points_per_element` per element.
-    pub weights: Vec<f64>,
-    /// Quadrature points per element.
+    /// Quadrature points per element of the rule the batch's elements
+    /// were built with (the rule itself is not kept: nothing reads it
+    /// after the build).
     pub points_per_element: usize,
     /// The polynomial basis of each element (discontinuous Galerkin
     /// batches only; empty otherwise).
@@ -232,8 +230,6 @@ impl Batch {
         copy(&mut self.stiffness, n, from, to);
         copy(&mut self.stress_grads, n, from, to);
         copy(&mut self.triangles, n, from, to);
-        copy(&mut self.points, n, from, to);
-        copy(&mut self.weights, n, from, to);
         if !self.dg.is_empty() {
             self.dg.swap(from, to);
         }
@@ -254,25 +250,15 @@ impl Batch {
         keep(&mut self.stiffness, n, len);
         keep(&mut self.stress_grads, n, len);
         keep(&mut self.triangles, n, len);
-        keep(&mut self.points, n, len);
-        keep(&mut self.weights, n, len);
         keep(&mut self.dg, n, len);
         self.elements.truncate(len);
     }
 
     /// Appends the `elements` (mesh ids) with their nodes and rest
     /// positions gathered from `mesh`, every other per-element array
-    /// zero-filled: `stiffness` values, `triangles` and `quadrature` points
-    /// per element as given (the quadrature's stride only where the batch
-    /// stores points).
-    fn extend_gathered(
-        &mut self,
-        mesh: &PolyMesh,
-        elements: &[u32],
-        stiffness: usize,
-        triangles: usize,
-        quadrature: usize,
-    ) {
+    /// zero-filled: `stiffness` values and `triangles` per element as
+    /// given.
+    fn extend_gathered(&mut self, mesh: &PolyMesh, elements: &[u32], stiffness: usize, triangles: usize) {
         // (with room to spare, [`crate::reserve_room`]: the first cut would
         // otherwise copy the whole batch of a mesh's tetrahedra to grow it)
         use crate::{reserve_room, reserve_to_write, resize_with_room};
@@ -289,8 +275,6 @@ impl Batch {
         resize_with_room(&mut self.stiffness, n * stiffness, 0.0);
         resize_with_room(&mut self.stress_grads, n * k, [0.0; 3]);
         resize_with_room(&mut self.triangles, n * triangles, [0; 3]);
-        resize_with_room(&mut self.points, n * quadrature, [0.0; 3]);
-        resize_with_room(&mut self.weights, n * quadrature, 0.0);
     }
 
     /// Removes entry `i`; the last entry takes its place.
@@ -310,8 +294,6 @@ impl Batch {
         self.stiffness.append(&mut other.stiffness);
         self.stress_grads.append(&mut other.stress_grads);
         self.triangles.append(&mut other.triangles);
-        self.points.append(&mut other.points);
-        self.weights.append(&mut other.weights);
         self.dg.append(&mut other.dg);
     }
 
@@ -831,6 +813,8 @@ pub(crate) struct Slots<'a> {
     pub mass_fraction: &'a mut [f64],
     pub stiffness: &'a mut [f64],
     pub stress_grads: &'a mut [[f64; 3]],
+    /// The element's quadrature points (m) and weights (m³), scratch of
+    /// the rule's length for the builder to fill.
     pub points: &'a mut [[f64; 3]],
     pub weights: &'a mut [f64],
 }
@@ -858,7 +842,7 @@ pub(crate) fn fill_batch<S>(
     let batch = batch_for(batches, kind, k, nq, material.lame());
     let (start, n) = (batch.len(), elements.len());
     let nt = if with_triangles { 2 * k - 4 } else { 0 };
-    batch.extend_gathered(mesh, elements, 9 * k * k, nt, nq);
+    batch.extend_gathered(mesh, elements, 9 * k * k, nt);
     let nodes = &batch.nodes[start * k..];
     let rest = &batch.rest[start * k..];
     let triangles = &mut batch.triangles[start * nt..];
@@ -886,12 +870,10 @@ pub(crate) fn fill_batch<S>(
         .zip(batch.mass_fraction[start * k..].par_chunks_mut(k))
         .zip(batch.stiffness[start * 9 * k * k..].par_chunks_mut(9 * k * k))
         .zip(batch.stress_grads[start * k..].par_chunks_mut(k))
-        .zip(batch.points[start * nq..].par_chunks_mut(nq.max(1)))
-        .zip(batch.weights[start * nq..].par_chunks_mut(nq.max(1)))
         .enumerate()
         .try_for_each_init(
-            &scratch,
-            |s, (i, (((((volume, mass_fraction), stiffness), stress_grads), points), weights))| {
+            || (scratch(), vec![[0.0; 3]; nq], vec![0.0; nq]),
+            |(s, points, weights), (i, (((volume, mass_fraction), stiffness), stress_grads))| {
                 let slots = Slots {
                     element: elements[i] as usize,
                     verts: &rest[i * k..(i + 1) * k],

@@ -19,7 +19,7 @@ pub(super) fn build_batch(
     let k = 4;
     let batch: &mut Batch = batch_for(batches, ElementKind::LinearTet, k, 1, material.lame());
     let start = batch.len();
-    batch.extend_gathered(mesh, elements, 0, 0, 0);
+    batch.extend_gathered(mesh, elements, 0, 0);
     batch.mass_fraction[start * k..].fill(0.25);
     let rest = &batch.rest[start * k..];
     (batch.volume[start..].par_iter_mut())

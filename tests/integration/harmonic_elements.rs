@@ -159,10 +159,16 @@ fn non_star_shaped_element_is_integrated_over_its_pieces() {
     let verts = mesh.nodes.clone();
     let triangles: Vec<[u32; 3]> = mesh.element_triangles(0).collect();
     assert!(cleave::store::harmonic::star_point(&verts, &triangles, mesh.element_diameter(0)).is_none());
+    // the rules the store builds it with: over the pieces, all weights positive
+    let order = HarmonicOptions::default().quadrature_order;
+    let rules = cleave::store::harmonic::element_rules(&verts, &triangles, mesh.element_diameter(0), order).unwrap();
+    for (_, weights) in [rules.stiffness(), &rules.mass] {
+        assert!(weights.iter().all(|&w| w >= 0.0));
+        assert!((weights.iter().sum::<f64>() - 11.0).abs() < 1e-12);
+    }
     let store = ElementStore::build(&mesh, &material(), &harmonic(true)).unwrap();
     let b = &store.batches[0];
     assert!((b.volume[0] - 11.0).abs() < 1e-12, "volume {}", b.volume[0]);
-    assert!(b.weights.iter().all(|&w| w >= 0.0));
     let ratio = b.stiffness_spectrum(0).ratio();
     println!("{} quadrature points, λ7/λmax {ratio:.2e}", b.points_per_element);
     assert!(ratio > 1e-4);
