@@ -161,6 +161,23 @@ fn the_cutting_table_sets_the_split_options() {
     assert!(e.to_string().contains("snapping"), "{e}");
 }
 
+/// `cleave bench --max-simd` caps the engine's kernels, and the report
+/// says at which level they ran; an unknown level is refused by name.
+#[test]
+fn bench_runs_its_kernels_at_the_level_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let args = ["bench", "--quick", "--only", "pipeline", "--max-simd", "scalar", "--json", json.to_str().unwrap()];
+    let (ok, stdout, err) = cleave(&args);
+    assert!(ok, "{err}");
+    assert!(stdout.lines().next().is_some_and(|l| l.ends_with("kernels at Scalar")), "{stdout}");
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(report["simd"], "Scalar");
+    assert!(report["measurements"].as_array().is_some_and(|rows| !rows.is_empty()));
+    let (ok, _, err) = cleave(&["bench", "--quick", "--only", "pipeline", "--max-simd", "sse9"]);
+    assert!(!ok && err.contains("sse9"), "{err}");
+}
+
 #[test]
 fn scene_errors_are_typed() {
     let e = LoadedScene::parse(Path::new("x.toml"), "[mesh]\nfile = \"a\"\n".into()).unwrap_err();

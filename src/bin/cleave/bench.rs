@@ -18,6 +18,7 @@ use cleave::store::dg::{DgOptions, Flux};
 use cleave::store::{BasisOptions, ElementStore, Family};
 use cleave::topology::{split_by_plane, SplitOptions};
 use cleave::Error;
+use cleave_kernels::lanes::{cap_simd_level, dispatched_level, SimdLevel};
 
 /// A shipped asset, by its path in the crate (`assets/...`).
 fn asset(name: &str) -> std::path::PathBuf {
@@ -34,6 +35,29 @@ fn present(path: std::path::PathBuf, rows: &str) -> Option<std::path::PathBuf> {
     }
     eprintln!("bench: {rows} rows left out: {} not found", path.display());
     None
+}
+
+/// The highest instruction set the engine's kernels may use in a run of
+/// the suite (see [`cap_simd_level`]): to measure the AVX2 path, or the
+/// scalar one, on a machine with more. faer's own products choose theirs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MaxSimd {
+    /// Plain `f64` (pulp's scalar backend).
+    Scalar,
+    /// x86-64-v3: AVX2.
+    Avx2,
+    /// x86-64-v4: AVX-512 (the best the machine offers, as without a cap).
+    Avx512,
+}
+
+impl MaxSimd {
+    fn level(self) -> SimdLevel {
+        match self {
+            MaxSimd::Scalar => SimdLevel::Scalar,
+            MaxSimd::Avx2 => SimdLevel::Avx2,
+            MaxSimd::Avx512 => SimdLevel::Avx512,
+        }
+    }
 }
 
 /// A part of the suite, to run alone.
@@ -85,6 +109,10 @@ pub struct Measurement {
 pub struct Report {
     /// Worker threads.
     pub threads: usize,
+    /// The instruction set the engine's kernels ran at (the machine's
+    /// best, or the one `--max-simd` capped them at; the `simd` rows
+    /// compare every level whatever the cap).
+    pub simd: String,
     /// Measurements in run order.
     pub measurements: Vec<Measurement>,
 }
@@ -93,8 +121,8 @@ impl Report {
     /// A plain-text table of the report.
     pub fn to_table(&self) -> String {
         let mut s = format!(
-            "threads: {}\n{:<24} {:<22} {:>10} {:>12} {:>16}\n",
-            self.threads, "stage", "mesh", "elements", "ms", "elements/s"
+            "threads: {}, kernels at {}\n{:<24} {:<22} {:>10} {:>12} {:>16}\n",
+            self.threads, self.simd, "stage", "mesh", "elements", "ms", "elements/s"
         );
         for m in &self.measurements {
             s += &format!("{:<24} {:<22} {:>10} {:>12.3} {:>16.0}", m.name, m.mesh, m.elements, m.ms, m.elements_per_s);
@@ -236,8 +264,12 @@ fn harmonic_measurements(quick: bool, material: &Material) -> Result<Vec<Measure
 }
 
 /// Runs the suite, or the group `only` (`quick`: small meshes, for smoke
-/// tests).
-pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Error> {
+/// tests), its kernels capped at `max_simd` (all but the `simd` group's,
+/// which compares the levels).
+pub(crate) fn run_suite(quick: bool, only: Option<Group>, max_simd: Option<MaxSimd>) -> Result<Report, Error> {
+    let cap = max_simd.map(MaxSimd::level);
+    cap_simd_level(cap);
+    let simd = format!("{:?}", dispatched_level(SimdLevel::Avx512));
     let run = |group: Group| only.is_none_or(|o| o == group);
     let material = Material::new(1e5, 0.3, 1000.0)?;
     let mut out = Vec::new();
@@ -261,12 +293,12 @@ pub(crate) fn run_suite(quick: bool, only: Option<Group>) -> Result<Report, Erro
         out.extend(body_measurements(quick)?);
     }
     if run(Group::Simd) {
-        out.extend(crate::simd::simd_measurements(quick)?);
+        out.extend(crate::simd::simd_measurements(quick, cap)?);
     }
     if only == Some(Group::Peers) {
         out.extend(peer_measurements(quick)?);
     }
-    Ok(Report { threads: rayon::current_num_threads(), measurements: out })
+    Ok(Report { threads: rayon::current_num_threads(), simd, measurements: out })
 }
 
 /// Tetrahedral `K_e` build, sparse pattern, assembly and the three Cholesky

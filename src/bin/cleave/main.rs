@@ -75,6 +75,11 @@ enum Command {
         /// Run one part of the suite only.
         #[arg(long, value_enum)]
         only: Option<bench::Group>,
+        /// Cap the engine's kernels at this instruction set (default: the
+        /// best the machine offers); the `simd` part compares every level
+        /// whatever the cap.
+        #[arg(long, value_enum)]
+        max_simd: Option<bench::MaxSimd>,
     },
 }
 
@@ -149,8 +154,8 @@ fn run(cli: Cli) -> Result<(), String> {
                 Err(format!("{} problem(s) found (first 20 shown)", problems.len()))
             }
         }
-        Command::Bench { json, threads, quick, only } => {
-            let report = in_pool(threads, || bench::run_suite(quick, only))?.map_err(|e| e.to_string())?;
+        Command::Bench { json, threads, quick, only, max_simd } => {
+            let report = in_pool(threads, || bench::run_suite(quick, only, max_simd))?.map_err(|e| e.to_string())?;
             println!("{}", report.to_table());
             if let Some(path) = json {
                 let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;

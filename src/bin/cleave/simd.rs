@@ -48,8 +48,9 @@ fn noise(i: usize) -> f64 {
     2.0 * (x as f64 / (1u64 << 53) as f64) - 1.0
 }
 
-/// The rows: per kernel, the reference and each level with its speed-up.
-pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> {
+/// The rows: per kernel, the reference and each level with its speed-up;
+/// afterwards the kernels are capped at `cap` again (the suite's cap).
+pub(crate) fn simd_measurements(quick: bool, cap: Option<SimdLevel>) -> Result<Vec<Measurement>, Error> {
     let scale = if quick { 1 } else { 10 };
     let levels: Vec<SimdLevel> = SimdLevel::available().into_iter().filter(|&l| l != SimdLevel::Scalar).collect();
     let mut kernels: Vec<Kernel> = Vec::new();
@@ -388,7 +389,7 @@ pub(crate) fn simd_measurements(quick: bool) -> Result<Vec<Measurement>, Error> 
                 t.push((kernel.run)(false));
             }
         }
-        cap_simd_level(None);
+        cap_simd_level(cap);
         let row = |name: String, ms: f64, speedup: f64| Measurement {
             name,
             mesh: kernel.size.clone(),
